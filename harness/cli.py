@@ -1,0 +1,4 @@
+"""Command-line interface `mbh`."""
+
+def main():
+    raise SystemExit("not yet")
