@@ -285,14 +285,16 @@ def _assemble(mech: Mechanism, cut: tuple[int, ...], reached: dict[str, Joint],
     depths = _depths(parent)
     joint_class = PLANAR_JOINT_CLASS if mech.planar else SPATIAL_JOINT_CLASS
     redundant = sum(max(0, costs[i] - joint_class[mech.joints[i].type]) for i in cut)
+    tree_joints = tuple(j.name for i, j in enumerate(mech.joints) if i not in cut)
+    flipped = {joint.name: joint.body2 == parent[body] for body, joint in reached.items()}
     return SpanningTree(
         bodies=tuple(names),
-        tree_joints=tuple(j.name for i, j in enumerate(mech.joints) if i not in cut),
+        tree_joints=tree_joints,
         cut_joints=tuple(mech.joints[i].name for i in cut),
         parent={body: parent[body] for body in names},
         parent_joint={body: reached[body].name for body in names},
         order=tuple(sorted(names, key=lambda body: (depths[body], names.index(body)))),
-        flipped={joint.name: joint.body2 == parent[body] for body, joint in reached.items()},
+        flipped={name: flipped[name] for name in tree_joints},
         redundant_closure_equations=redundant,
     )
 
