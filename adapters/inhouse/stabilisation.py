@@ -1,0 +1,272 @@
+"""Formulations and constraint stabilisations as interchangeable strategies (seed 002 ch. 3 and 5).
+
+Each strategy is a second-order problem for :mod:`adapters.inhouse.integrators`: it provides
+``acceleration(t, q, v)`` (an index-1 form of the equations of motion) and ``project(t, q, v)``
+(a post-step correction, the identity unless the method corrects the state).
+
+==============  =========================================================================
+name            method
+==============  =========================================================================
+``none``        augmented form Φ_q q̈ = γ, no stabilisation (002 eq. 77)
+``baumgarte``   γ* = γ − 2αΦ̇ − β²Φ (eq. 110); ``auto`` uses α = 1/Δt, β = √2/Δt (eq. 111)
+``penalty``     (M + Φ_qᵀαΦ_q) q̈ = Q − Φ_qᵀα(−γ + 2ΩμΦ̇ + Ω²Φ) (eq. 115–116)
+``auglag``      augmented Lagrangian, iterated to a tolerance (eq. 117–120)
+``geometric``   position projection with the Moore–Penrose inverse (eq. 127), then the
+                energy-based velocity correction (eq. 128–136)
+``direct``      direct violation correction: position (eq. 127) and velocity (eq. 137) projection
+==============  =========================================================================
+
+Coordinate partitioning (eq. 78–89) lives in :mod:`adapters.inhouse.partition`.
+
+A mechanism with redundant constraints keeps only the independent equations found by the rank
+analysis at the initial configuration (000 §1.3.2); its reaction split is then not unique.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from adapters.inhouse.constraints import ConstraintSystem
+from adapters.inhouse.dynamics import Dynamics, solve_augmented
+from adapters.inhouse.integrators.base import SecondOrderSystem
+from adapters.inhouse.rank import full_pivot_elimination
+from adapters.inhouse.states import body_states
+from harness.energy import interval_work, mechanical_energy
+from harness.model import Mechanism
+from harness.outputs import body_rotations
+
+
+class Formulation(SecondOrderSystem):
+    """Index-1 equations of motion over absolute coordinates; subclasses change γ, the solve or
+    the post-step correction.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    q0 : ndarray, shape (n,)
+        Assembled initial configuration (the rank analysis that picks independent rows runs here).
+    dt : float
+        Step size, s (for the Δt-based parameter rules).
+    **params
+        The strategy's parameters (:attr:`defaults`).
+
+    Attributes
+    ----------
+    counters : dict
+        ``jacobian_evals``, ``factorizations``, ``newton_iterations`` spent by the strategy.
+    notes : list of str
+    """
+
+    name = ""
+    description = ""
+    defaults: dict = {}
+
+    def __init__(self, mech: Mechanism, q0: np.ndarray, dt: float, **params):
+        self.mech = mech
+        self.dynamics = Dynamics(mech)
+        self.constraints = ConstraintSystem(mech)
+        self.n = self.constraints.layout.n
+        self.dt = dt
+        self.params = {**self.defaults, **params}
+        rank, rows = full_pivot_elimination(self.constraints.jacobian(q0))
+        self.rows = np.sort(rows)
+        self.notes = []
+        if rank < self.constraints.m:
+            dropped = sorted(set(range(self.constraints.m)) - set(self.rows.tolist()))
+            labels = ", ".join(self.constraints.labels[i] for i in dropped)
+            self.notes.append(f"{len(dropped)} redundant equation(s) dropped ({labels}); "
+                              "the reaction split among the redundant joints is not unique")
+        self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
+
+    # -- constraint pieces on the independent rows ------------------------------------------
+    def jacobian(self, t, q):
+        self.counters["jacobian_evals"] += 1
+        return self.constraints.jacobian(q, t)[self.rows]
+
+    def phi(self, t, q):
+        return self.constraints.phi(q, t)[self.rows]
+
+    def gamma(self, t, q, v):
+        return self.constraints.gamma(q, v, t)[self.rows]
+
+    # -- the index-1 right-hand side ---------------------------------------------------------
+    def acceleration(self, t, q, v):
+        mass, force = self.dynamics.mass_and_forces(t, q, v)
+        jac = self.jacobian(t, q)
+        self.counters["factorizations"] += 1
+        return solve_augmented(mass, jac, force, self.stabilised_gamma(t, q, v, jac))[0]
+
+    def stabilised_gamma(self, t, q, v, jac):
+        """Right-hand side of Φ_q q̈ = γ*; plain γ here."""
+        return self.gamma(t, q, v)
+
+    def start(self, q, v):
+        """Called once with the initial state before the first step (no-op here)."""
+
+    # -- the integrated state (identity here; reduced by coordinate partitioning) -----------
+    def reduce(self, q, v):
+        """Integrated state from a full state (q, q̇)."""
+        return q, v
+
+    def expand(self, t, q, v):
+        """Full state (q, q̇) from the integrated state."""
+        return q, v
+
+    def needs_repartition(self, q_full) -> bool:
+        """True when the integrated coordinates must be chosen again (partitioning only)."""
+        return False
+
+    def choose_partition(self, q_full) -> None:
+        """Choose the integrated coordinates again at q_full (partitioning only)."""
+
+
+class NoStabilisation(Formulation):
+    name = "none"
+    description = "augmented Lagrange-multiplier form, no stabilisation (002 eq. 77)"
+
+
+class Baumgarte(Formulation):
+    name = "baumgarte"
+    description = ("Baumgarte: γ − 2αΦ̇ − β²Φ (002 eq. 110); auto=true uses α = 1/Δt, "
+                   "β = √2/Δt (eq. 111)")
+    defaults = {"alpha": 5.0, "beta": 5.0, "auto": False}
+
+    def __init__(self, mech, q0, dt, **params):
+        super().__init__(mech, q0, dt, **params)
+        if self.params["auto"]:
+            self.params["alpha"], self.params["beta"] = 1.0 / dt, np.sqrt(2.0) / dt
+
+    def stabilised_gamma(self, t, q, v, jac):
+        alpha, beta = self.params["alpha"], self.params["beta"]
+        return self.gamma(t, q, v) - 2.0 * alpha * (jac @ v) - beta ** 2 * self.phi(t, q)
+
+
+class Penalty(Formulation):
+    name = "penalty"
+    description = ("penalty formulation (002 eq. 115–116); penalty=0 means 1e7 × the largest "
+                   "mass-matrix entry")
+    defaults = {"penalty": 0.0, "omega": 10.0, "mu": 1.0}
+
+    def __init__(self, mech, q0, dt, **params):
+        super().__init__(mech, q0, dt, **params)
+        if self.params["penalty"] <= 0:
+            mass, _ = self.dynamics.mass_and_forces(0.0, q0, np.zeros_like(q0))
+            self.params["penalty"] = 1e7 * float(np.abs(mass).max())
+
+    def _penalty_terms(self, t, q, v):
+        """Pieces of eq. 116: Q, Φ_q, the factorised M + Φ_qᵀαΦ_q, and the constraint target
+        c = γ − 2ΩμΦ̇ − Ω²Φ so that Φ̈ + 2ΩμΦ̇ + Ω²Φ = Φ_q q̈ − c."""
+        alpha, omega, mu = self.params["penalty"], self.params["omega"], self.params["mu"]
+        mass, force = self.dynamics.mass_and_forces(t, q, v)
+        jac = self.jacobian(t, q)
+        target = self.gamma(t, q, v) - 2.0 * omega * mu * (jac @ v) - omega ** 2 * self.phi(t, q)
+        self.counters["factorizations"] += 1
+        lu = scipy.linalg.lu_factor(mass + alpha * jac.T @ jac, check_finite=False)
+        return force, jac, lu, target
+
+    def acceleration(self, t, q, v):
+        force, jac, lu, target = self._penalty_terms(t, q, v)
+        return scipy.linalg.lu_solve(lu, force + self.params["penalty"] * jac.T @ target,
+                                     check_finite=False)
+
+
+class AugmentedLagrangian(Penalty):
+    name = "auglag"
+    description = ("augmented Lagrangian (002 eq. 117–120): multipliers updated until the "
+                   "accelerations change less than tol (relative)")
+    defaults = {**Penalty.defaults, "al_tol": 1e-10, "al_max_iter": 50}
+
+    def acceleration(self, t, q, v):
+        # λ*₀ = 0 makes the first iterate the penalty solution (eq. 120 starts from M q̈₀ = Q,
+        # which is singular for Euler parameters, M θ = 0); then eq. 119 updates λ*.
+        alpha = self.params["penalty"]
+        force, jac, lu, target = self._penalty_terms(t, q, v)
+        multipliers = np.zeros(jac.shape[0])
+        acc = None
+        for _ in range(int(self.params["al_max_iter"])):
+            self.counters["newton_iterations"] += 1
+            rhs = force - jac.T @ multipliers + alpha * jac.T @ target
+            new = scipy.linalg.lu_solve(lu, rhs, check_finite=False)
+            multipliers = multipliers + alpha * (jac @ new - target)
+            converged = acc is not None and (
+                np.max(np.abs(new - acc)) <= self.params["al_tol"] * max(1.0, np.max(np.abs(new))))
+            acc = new
+            if converged:
+                break
+        return acc
+
+
+class _Projection(Formulation):
+    """Position projection with the Moore–Penrose inverse, iterated (002 eq. 121–127)."""
+
+    defaults = {"proj_tol": 1e-12, "proj_max_iter": 10}
+
+    def _min_norm(self, jac, residual):
+        """Φ_q⁺ r = Φ_qᵀ(Φ_qΦ_qᵀ)⁻¹ r (eq. 126) by a Cholesky solve; least squares if singular."""
+        self.counters["factorizations"] += 1
+        try:
+            factor = scipy.linalg.cho_factor(jac @ jac.T, check_finite=False)
+            return jac.T @ scipy.linalg.cho_solve(factor, residual, check_finite=False)
+        except np.linalg.LinAlgError:
+            return scipy.linalg.lstsq(jac, residual)[0]
+
+    def project_position(self, t, q):
+        for _ in range(int(self.params["proj_max_iter"])):
+            residual = self.phi(t, q)
+            if np.max(np.abs(residual)) < self.params["proj_tol"]:
+                break
+            self.counters["newton_iterations"] += 1
+            q = q - self._min_norm(self.jacobian(t, q), residual)
+        return q
+
+
+class DirectCorrection(_Projection):
+    name = "direct"
+    description = "direct violation correction: position (002 eq. 127) and velocity (eq. 137) projection"
+
+    def project(self, t, q, v):
+        q = self.project_position(t, q)
+        jac = self.jacobian(t, q)
+        return q, v - self._min_norm(jac, jac @ v)
+
+
+class GeometricElimination(_Projection):
+    name = "geometric"
+    description = ("geometric elimination: position projection (002 eq. 127), then the energy-based "
+                   "velocity correction (eq. 128–136) with the work of applied loads integrated "
+                   "along the motion")
+
+    def __init__(self, mech, q0, dt, **params):
+        super().__init__(mech, q0, dt, **params)
+        self._layout = self.constraints.layout
+        self._previous = None
+        self._work = 0.0
+        self._energy0 = 0.0
+
+    def _state(self, q, v):
+        states = body_states(self._layout, q, v)
+        return {"position": states.position, "rotation": body_rotations(states.quaternion),
+                "velocity": states.velocity, "angular_velocity": states.angular_velocity}
+
+    def start(self, q, v):
+        """Record E₀ = T + V at the initial state."""
+        self._previous = self._state(q, v)
+        self._energy0 = float(mechanical_energy(self.mech, self._previous))
+
+    def project(self, t, q, v):
+        q = self.project_position(t, q)
+        state = self._state(q, v)
+        self._work += float(interval_work(self.mech, self._previous, state, self.dt))
+        psi = float(mechanical_energy(self.mech, state)) - self._work - self._energy0  # eq. 128
+        mass, _ = self.dynamics.mass_and_forces(t, q, v)
+        gradient = mass @ v  # ∂Ψ/∂q̇ (eq. 130)
+        norm = gradient @ gradient
+        if norm > 0:
+            v = v - psi * gradient / norm  # eq. 136
+        self._previous = self._state(q, v)
+        return q, v
+
+
+STRATEGIES = {cls.name: cls for cls in (NoStabilisation, Baumgarte, Penalty, AugmentedLagrangian,
+                                        DirectCorrection, GeometricElimination)}

@@ -1,0 +1,89 @@
+"""Named outputs computed from body states through the neutral model (DESIGN.md rule 2).
+
+Joint coordinates are measured from the joints' body-frame geometry: the rotation of a revolute or
+cylindrical joint is the angle from ``h = A₁ n̄₁`` to ``f = A₂ n̄₂`` about ``a = A₁ ā₁``
+(zero in the reference configuration, right-hand rule); the slide of a prismatic or translational
+joint is ``a · (p₂ − p₁)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from harness.model import GROUND, Joint, Mechanism
+from harness.trajectory import Trajectory
+
+
+def body_rotations(quaternions: np.ndarray) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) from scalar-first quaternions (..., 4)."""
+    flat = quaternions.reshape(-1, 4)
+    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*quaternions.shape[:-1], 3, 3)
+
+
+def body_frame(mech: Mechanism, body: str, positions, rotations):
+    """World position (..., 3) and rotation (..., 3, 3) of ``body`` (ground: the world frame)."""
+    if body == GROUND:
+        shape = positions.shape[:-2]
+        return np.zeros((*shape, 3)), np.broadcast_to(np.eye(3), (*shape, 3, 3))
+    index = mech.body_index(body)
+    return positions[..., index, :], rotations[..., index, :, :]
+
+
+def joint_angle(mech: Mechanism, joint: Joint, positions, rotations) -> np.ndarray:
+    """Wrapped joint rotation in (−π, π], shape (...,), for states (..., n_bodies, ·)."""
+    _, rot1 = body_frame(mech, joint.body1, positions, rotations)
+    _, rot2 = body_frame(mech, joint.body2, positions, rotations)
+    h = rot1 @ joint.normal1
+    f = rot2 @ joint.normal2
+    a = rot1 @ joint.axis1
+    return np.arctan2(np.einsum("...i,...i", np.cross(h, f), a), np.einsum("...i,...i", h, f))
+
+
+def joint_slide(mech: Mechanism, joint: Joint, positions, rotations) -> np.ndarray:
+    """Joint translation a · (p₂ − p₁) minus its reference value, shape (...,), m."""
+    pos1, rot1 = body_frame(mech, joint.body1, positions, rotations)
+    pos2, rot2 = body_frame(mech, joint.body2, positions, rotations)
+    p1 = pos1 + rot1 @ joint.point1
+    p2 = pos2 + rot2 @ joint.point2
+    return np.einsum("...i,...i", rot1 @ joint.axis1, p2 - p1)
+
+
+def unwrap_from_start(angles: np.ndarray) -> np.ndarray:
+    """Unwrapped angle series relative to its first sample, shape (n_samples,)."""
+    unwrapped = np.unwrap(angles)
+    return unwrapped - unwrapped[0]
+
+
+def output_series(mech: Mechanism, trajectory: Trajectory, name: str) -> np.ndarray:
+    """The named output at every sample, shape (n_samples,).
+
+    Joint angles are unwrapped, so samples must be dense enough that the joint turns less than π
+    between two of them.
+    """
+    output = mech.output(name)
+    if trajectory.n_samples == 0:
+        return np.zeros(0)
+    if output.kind in ("position", "velocity"):
+        data = trajectory.position if output.kind == "position" else trajectory.velocity
+        return data[:, mech.body_index(output.target), output.component].copy()
+    joint = mech.joint(output.target)
+    rotations = body_rotations(trajectory.quaternion)
+    if output.kind == "joint_position":
+        slide = joint_slide(mech, joint, trajectory.position, rotations)
+        return slide - slide[0]
+    angle = unwrap_from_start(joint_angle(mech, joint, trajectory.position, rotations))
+    if output.kind == "joint_angle":
+        return angle
+    return joint_rate(mech, joint, trajectory.angular_velocity, rotations)
+
+
+def joint_rate(mech: Mechanism, joint: Joint, angular_velocity, rotations) -> np.ndarray:
+    """Relative angular velocity of body2 about the joint axis, shape (...,), rad/s."""
+    def omega(body):
+        if body == GROUND:
+            return np.zeros(angular_velocity.shape[:-2] + (3,))
+        return angular_velocity[..., mech.body_index(body), :]
+    _, rot1 = body_frame(mech, joint.body1, np.zeros(angular_velocity.shape), rotations)
+    axis = rot1 @ joint.axis1
+    return np.einsum("...i,...i", omega(joint.body2) - omega(joint.body1), axis)
