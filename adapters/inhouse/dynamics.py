@@ -19,7 +19,6 @@ is solved by LU factorisation, never by explicit inverses.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 from numba import njit
 
 from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
@@ -93,12 +92,59 @@ def _add_torque(out, q, nc, body, n):
     out[k + 3:k + 7] += g_bar(theta).T @ local
 
 
+F_JOINT_TORQUE, F_JOINT_FORCE, F_POINT, F_TORQUE, F_SPRING = range(5)
+
+
+@njit(cache=True)
+def _applied_forces(out, q, v, nc, kind, bi, bj, va, vb, vc, scalars):
+    """Add the generalised forces of the load table (see :class:`Dynamics`) to ``out``."""
+    for k in range(kind.shape[0]):
+        i, j, kd = bi[k], bj[k], kind[k]
+        if kd == F_JOINT_TORQUE:  # τ about the joint axis on body j, −τ on body i
+            n = scalars[k, 0] * rotate(q, nc, i, va[k])
+            _add_torque(out, q, nc, j, n)
+            _add_torque(out, q, nc, i, -n)
+        elif kd == F_JOINT_FORCE:  # f along the axis at the joint points
+            f = scalars[k, 0] * rotate(q, nc, i, va[k])
+            _add_point_force(out, q, nc, j, vc[k], f)
+            _add_point_force(out, q, nc, i, vb[k], -f)
+        elif kd == F_POINT:
+            _add_point_force(out, q, nc, i, vb[k], va[k])
+        elif kd == F_TORQUE:
+            _add_torque(out, q, nc, i, va[k])
+        else:  # F_SPRING: tension k(L − L0) + c L̇ pulls the points together
+            d = point(q, nc, j, vc[k]) - point(q, nc, i, vb[k])
+            length = np.sqrt(d @ d)
+            direction = d / length
+            rate = direction @ (point_rate(q, v, nc, j, vc[k]) - point_rate(q, v, nc, i, vb[k]))
+            tension = scalars[k, 0] * (length - scalars[k, 2]) + scalars[k, 1] * rate
+            _add_point_force(out, q, nc, i, vb[k], tension * direction)
+            _add_point_force(out, q, nc, j, vc[k], -tension * direction)
+
+
+@njit(cache=True)
+def mass_and_forces_kernel(q, v, nc, masses, inertias, gravity, kind, bi, bj, va, vb, vc, scalars):
+    """M(q) (n, n) and Q_e + Q_v (n,), all loads included."""
+    mass, force = _mass_and_inertial_forces(q, v, nc, masses, inertias, gravity)
+    _applied_forces(force, q, v, nc, kind, bi, bj, va, vb, vc, scalars)
+    return mass, force
+
+
 class Dynamics:
     """Mass matrix and applied forces of a mechanism in absolute coordinates.
 
-    Parameters
-    ----------
-    mech : Mechanism
+    The loads are compiled into a table evaluated by :func:`_applied_forces`: ``kind`` (k,),
+    body indices ``bi, bj`` (k,), body-frame vectors ``va, vb, vc`` (k, 3) and ``scalars`` (k, 3):
+
+    ==============  ==========================================================================
+    kind            meaning
+    ==============  ==========================================================================
+    JOINT_TORQUE    τ = scalars[0] about axis va (on body i) acting on j, reaction on i
+    JOINT_FORCE     f = scalars[0] along axis va (on i) at points vb (on i) / vc (on j)
+    POINT           world force va at body point vb of body i
+    TORQUE          world torque va on body i
+    SPRING          points vb (i), vc (j); stiffness, damping, free length in scalars
+    ==============  ==========================================================================
     """
 
     def __init__(self, mech: Mechanism):
@@ -107,62 +153,41 @@ class Dynamics:
         self.masses = mech.masses
         self.inertias = np.ascontiguousarray([b.inertia for b in mech.bodies])
         self.gravity = np.asarray(mech.gravity, dtype=float)
-        self._forces = [self._compile_force(f) for f in mech.forces]
+        rows = [self._load_row(f) for f in mech.forces]
+        self._table = (
+            np.array([r[0] for r in rows], dtype=np.int64),
+            np.array([r[1] for r in rows], dtype=np.int64),
+            np.array([r[2] for r in rows], dtype=np.int64),
+            *(np.array([r[k] for r in rows], dtype=float).reshape(-1, 3) for k in (3, 4, 5, 6)),
+        )
 
-    def _compile_force(self, force):
+    def _load_row(self, force):
+        """(kind, bi, bj, va, vb, vc, scalars) of one load."""
         index = self.mech.body_index
+        zero = np.zeros(3)
         if isinstance(force, JointActuation):
             joint = self.mech.joint(force.joint)
-            return ("actuation", index(joint.body1), index(joint.body2), joint, force.value)
+            kind = F_JOINT_TORQUE if joint.type in ("revolute", "cylindrical") else F_JOINT_FORCE
+            return (kind, index(joint.body1), index(joint.body2), joint.axis1, joint.point1,
+                    joint.point2, (force.value, 0.0, 0.0))
         if isinstance(force, BodyForce):
-            return ("point", index(force.body), force.point, np.asarray(force.force, float))
+            return (F_POINT, index(force.body), -1, force.force, force.point, zero, (0.0, 0.0, 0.0))
         if isinstance(force, BodyTorque):
-            return ("torque", index(force.body), np.asarray(force.torque, float))
+            return (F_TORQUE, index(force.body), -1, force.torque, zero, zero, (0.0, 0.0, 0.0))
         if isinstance(force, SpringDamper):
-            return ("spring", index(force.body1), index(force.body2), force)
-        raise TypeError(f"unknown force {force!r}")
+            return (F_SPRING, index(force.body1), index(force.body2), zero, force.point1,
+                    force.point2, (force.stiffness, force.damping, force.free_length))
+        raise TypeError(f"unknown load {force!r}")
 
     def mass_and_forces(self, t: float, q: np.ndarray, v: np.ndarray):
-        """M(q), shape (n, n), and Q_e + Q_v, shape (n,)  (t in s, unused by constant loads)."""
-        nc = self.layout.nc
-        mass, force = _mass_and_inertial_forces(q, v, nc, self.masses, self.inertias, self.gravity)
-        for spec in self._forces:
-            kind = spec[0]
-            if kind == "actuation":
-                self._add_actuation(force, q, spec)
-            elif kind == "point":
-                _add_point_force(force, q, nc, spec[1], spec[2], spec[3])
-            elif kind == "torque":
-                _add_torque(force, q, nc, spec[1], spec[2])
-            else:
-                self._add_spring(force, q, v, spec)
-        return mass, force
-
-    def _add_actuation(self, force, q, spec):
-        _, i, j, joint, value = spec
-        nc = self.layout.nc
-        axis = rotate(q, nc, i, joint.axis1)
-        if joint.type in ("revolute", "cylindrical"):
-            _add_torque(force, q, nc, j, value * axis)
-            _add_torque(force, q, nc, i, -value * axis)
-        else:
-            _add_point_force(force, q, nc, j, joint.point2, value * axis)
-            _add_point_force(force, q, nc, i, joint.point1, -value * axis)
-
-    def _add_spring(self, force, q, v, spec):
-        _, i, j, spring = spec
-        nc = self.layout.nc
-        d = point(q, nc, j, spring.point2) - point(q, nc, i, spring.point1)
-        length = np.linalg.norm(d)
-        direction = d / length
-        rate = direction @ (point_rate(q, v, nc, j, spring.point2) - point_rate(q, v, nc, i, spring.point1))
-        tension = spring.stiffness * (length - spring.free_length) + spring.damping * rate
-        _add_point_force(force, q, nc, i, spring.point1, tension * direction)
-        _add_point_force(force, q, nc, j, spring.point2, -tension * direction)
+        """M(q), shape (n, n), and Q_e + Q_v, shape (n,)  (loads are constant in t)."""
+        return mass_and_forces_kernel(q, v, self.layout.nc, self.masses, self.inertias,
+                                      self.gravity, *self._table)
 
 
-def solve_augmented(mass: np.ndarray, jacobian: np.ndarray, force: np.ndarray, gamma: np.ndarray):
-    """Solve the augmented system (002 eq. 77) by LU factorisation.
+@njit(cache=True)
+def solve_augmented(mass, jacobian, force, gamma):
+    """Solve the augmented system (002 eq. 77) by LU factorisation (LAPACK gesv).
 
     Returns
     -------
@@ -174,5 +199,6 @@ def solve_augmented(mass: np.ndarray, jacobian: np.ndarray, force: np.ndarray, g
     matrix[:n, :n] = mass
     matrix[:n, n:] = jacobian.T
     matrix[n:, :n] = jacobian
-    solution = scipy.linalg.solve(matrix, np.concatenate([force, gamma]), check_finite=False)
+    rhs = np.concatenate((force, gamma))
+    solution = np.linalg.solve(matrix, rhs)
     return solution[:n], solution[n:]

@@ -19,10 +19,10 @@ history is lost).
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from adapters.inhouse.dynamics import solve_augmented
 from adapters.inhouse.integrators.base import StepFailure
+from adapters.inhouse.linalg import solve
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.stabilisation import Formulation
 
@@ -82,8 +82,7 @@ class CoordinatePartitioning(Formulation):
                 break
             self.counters["newton_iterations"] += 1
             jac = self.jacobian(t, q)
-            q[self.dependent] -= scipy.linalg.solve(jac[:, self.dependent], residual,
-                                                    check_finite=False)
+            q[self.dependent] -= solve(np.ascontiguousarray(jac[:, self.dependent]), residual)
         else:
             raise StepFailure(f"dependent coordinates did not converge (max |Φ| = "
                               f"{np.max(np.abs(residual)):.3g}) at t = {t:g}")
@@ -91,8 +90,8 @@ class CoordinatePartitioning(Formulation):
         jac = self.jacobian(t, q)
         v = np.zeros(q.size)
         v[self.independent] = v_ind
-        v[self.dependent] = scipy.linalg.solve(jac[:, self.dependent],
-                                               -jac[:, self.independent] @ v_ind, check_finite=False)
+        v[self.dependent] = solve(np.ascontiguousarray(jac[:, self.dependent]),
+                                  -jac[:, self.independent] @ v_ind)
         return q, v
 
     # -- the reduced problem -------------------------------------------------------------------

@@ -30,6 +30,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, solve_augmented
 from adapters.inhouse.integrators.base import SecondOrderSystem
+from adapters.inhouse.linalg import min_norm_correction
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.states import body_states
 from harness.energy import interval_work, mechanical_energy
@@ -203,11 +204,10 @@ class _Projection(Formulation):
     defaults = {"proj_tol": 1e-12, "proj_max_iter": 10}
 
     def _min_norm(self, jac, residual):
-        """Φ_q⁺ r = Φ_qᵀ(Φ_qΦ_qᵀ)⁻¹ r (eq. 126) by a Cholesky solve; least squares if singular."""
+        """Φ_q⁺ r (eq. 126); least squares when Φ_q Φ_qᵀ is singular."""
         self.counters["factorizations"] += 1
         try:
-            factor = scipy.linalg.cho_factor(jac @ jac.T, check_finite=False)
-            return jac.T @ scipy.linalg.cho_solve(factor, residual, check_finite=False)
+            return min_norm_correction(jac, residual)
         except np.linalg.LinAlgError:
             return scipy.linalg.lstsq(jac, residual)[0]
 
