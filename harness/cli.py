@@ -160,6 +160,14 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_seed_table(args) -> int:
+    from harness.seedtable import format_rows, seed_rows
+
+    rows = seed_rows(repeats=args.repeats)
+    print(json.dumps(rows, indent=2) if args.json else format_rows(rows))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mbh", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -188,6 +196,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-reference", action="store_true", help="skip the reference comparison")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=cmd_simulate)
+
+    p = sub.add_parser("seed-table", help="the seed's comparison table (Rouvinen 2003, ch. 7 setup)")
+    p.add_argument("--repeats", type=int, default=3, help="runs per case for the mean wall time")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_seed_table)
 
     p = sub.add_parser("export", help="write the engine model an adapter generates (MJCF)")
     p.add_argument("name")

@@ -110,7 +110,7 @@ def simulate(mech: Mechanism, formulation_class, integrator_name: str, integrato
     assembly = assemble(mech)
     formulation = formulation_class(mech, assembly.q, dt, **formulation_params)
     formulation.start(assembly.q, assembly.v)
-    formulation.acceleration(0.0, *formulation.reduce(assembly.q, assembly.v))  # compile kernels
+    formulation.warm_up(assembly.q, assembly.v)
     run = _Run(mech, formulation, integrator_name, integrator_params, dt)
     run.start(0.0, assembly.q, assembly.v)
     samples = np.asarray(sample_times, dtype=float)

@@ -14,6 +14,12 @@ def solve(matrix, rhs):
 
 
 @njit(cache=True)
+def solve_matrix(matrix, rhs):
+    """X with matrix @ X = rhs, matrix (k, k), rhs (k, r)."""
+    return np.linalg.solve(matrix, rhs)
+
+
+@njit(cache=True)
 def min_norm_correction(jacobian, residual):
     """Φ_q⁺ r = Φ_qᵀ (Φ_q Φ_qᵀ)⁻¹ r for a full-row-rank Φ_q (m, n), r (m,)  (seed 002 eq. 126)."""
     return jacobian.T @ np.linalg.solve(jacobian @ jacobian.T, residual)

@@ -22,7 +22,7 @@ import numpy as np
 
 from adapters.inhouse.dynamics import solve_augmented
 from adapters.inhouse.integrators.base import StepFailure
-from adapters.inhouse.linalg import solve
+from adapters.inhouse.linalg import solve, solve_matrix
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.stabilisation import Formulation
 
@@ -56,6 +56,7 @@ class CoordinatePartitioning(Formulation):
         self.independent = np.setdiff1d(np.arange(jac.shape[1]), self.dependent)
         self.n = self.independent.size
         self.repartitions += 1
+        self._sensitivity = None
 
     def needs_repartition(self, q_full: np.ndarray) -> bool:
         """True when cond(Φ_qD) of the current split exceeds ``cond_ratio`` × that of the split
@@ -73,8 +74,14 @@ class CoordinatePartitioning(Formulation):
         return q[self.independent].copy(), v[self.independent].copy()
 
     def expand(self, t: float, q_ind: np.ndarray, v_ind: np.ndarray):
-        """Full (q, q̇) consistent with the constraints, from (q_I, q̇_I) (eq. 80–84)."""
+        """Full (q, q̇) consistent with the constraints, from (q_I, q̇_I) (eq. 80–84).
+
+        Newton starts from the last solution moved along the sensitivity dq_D/dq_I there, so it
+        usually needs one or two iterations.
+        """
         q = self._q.copy()
+        if self._sensitivity is not None:
+            q[self.dependent] += self._sensitivity @ (q_ind - q[self.independent])
         q[self.independent] = q_ind
         for _ in range(int(self.params["newton_max_iter"])):
             residual = self.phi(t, q)
@@ -86,12 +93,13 @@ class CoordinatePartitioning(Formulation):
         else:
             raise StepFailure(f"dependent coordinates did not converge (max |Φ| = "
                               f"{np.max(np.abs(residual)):.3g}) at t = {t:g}")
-        self._q = q
         jac = self.jacobian(t, q)
+        block = np.ascontiguousarray(jac[:, self.dependent])
+        self._sensitivity = solve_matrix(block, -np.ascontiguousarray(jac[:, self.independent]))
+        self._q = q
         v = np.zeros(q.size)
         v[self.independent] = v_ind
-        v[self.dependent] = solve(np.ascontiguousarray(jac[:, self.dependent]),
-                                  -jac[:, self.independent] @ v_ind)
+        v[self.dependent] = self._sensitivity @ v_ind
         return q, v
 
     # -- the reduced problem -------------------------------------------------------------------

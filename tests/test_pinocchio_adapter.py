@@ -1,0 +1,258 @@
+"""The Pinocchio adapter: build, start, faithfulness switches, accuracy and failure reporting.
+
+Tolerances come from measurements on this machine (numbers in the comments, run with
+``.venv/bin/python -m pytest tests/test_pinocchio_adapter.py``), with a margin of 3–10×.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from adapters import get_adapter
+from adapters.base import UnsupportedCase
+from adapters.pinocchio_adapter.adapter import solver_settings
+from adapters.pinocchio_adapter.dynamics import ConstrainedProblem
+from harness.initial import initial_state
+from harness.model import GROUND
+from harness.outputs import output_series
+from harness.scenario import load, scenario_names
+
+ADAPTER = get_adapter("pinocchio")
+
+#: Cut joints, notes and number of joint velocities of every shipped scenario (closure costs:
+#: spherical 3, planar revolute 3, spatial revolute 6, slides and universal joints not closable).
+EXPECTED_TREES = {
+    "fourbar": (("B",), ["1 redundant closure equation(s)"], 3),
+    "fourbar_spatial": (("B",), [], 4),
+    "slider_crank": (("A",), [], 4),
+    "slider_crank_planar": (("A",), ["1 redundant closure equation(s)"], 3),
+}
+
+
+def _run(mech, method, dt, t_end):
+    """Simulate ``mech`` sampling every step."""
+    model = ADAPTER.build(mech)
+    times = np.arange(int(round(t_end / dt)) + 1) * dt
+    return ADAPTER.simulate(model, method, dt, t_end, times)
+
+
+def _closure_gap(mech, trajectory, joint_name):
+    """Largest distance (m) between the two points of ``joint_name`` over the samples."""
+    joint = mech.joint(joint_name)
+    points = []
+    for body, point in ((joint.body1, joint.point1), (joint.body2, joint.point2)):
+        if body == GROUND:
+            points.append(point)
+            continue
+        index = mech.body_index(body)
+        quat = trajectory.quaternion[:, index]
+        rotations = np.array([pin.Quaternion(w, x, y, z).toRotationMatrix() for w, x, y, z in quat])
+        points.append(trajectory.position[:, index] + rotations @ point)
+    return np.max(np.linalg.norm(points[0] - points[1], axis=1))
+
+
+# --- build -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_build_every_shipped_scenario(name):
+    model = ADAPTER.build(load(name))
+    cut, notes, nv = EXPECTED_TREES[name]
+    assert model.tree.cut_joints == cut
+    assert list(model.notes) == notes
+    assert model.model.nv == nv
+
+
+def test_build_rejects_a_loop_of_slides():
+    mech = load("slider_crank_planar")
+    slides = dataclasses.replace(mech, joints=tuple(
+        dataclasses.replace(joint, type="prismatic") for joint in mech.joints))
+    with pytest.raises(UnsupportedCase, match="cannot close: .*prismatic"):
+        ADAPTER.build(slides)
+
+
+def test_methods_include_default_and_best():
+    names = [spec.name for spec in ADAPTER.methods()]
+    assert names[:2] == ["default", "best"]
+    assert ADAPTER.method_spec("best")[1]["integrator"] == "rk4"
+
+
+@pytest.mark.parametrize("method", ["nonsense", "best:integrator=leapfrog", "best:kq=1"])
+def test_bad_method_raises_value_error(method):
+    model = ADAPTER.build(load("fourbar"))
+    with pytest.raises(ValueError):
+        ADAPTER.simulate(model, method, 1e-3, 1e-3, np.array([0.0]))
+
+
+# --- start -------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_first_sample_is_the_harness_initial_state(name):
+    mech = load(name)
+    trajectory = _run(mech, "rk4", 1e-3, 1e-3)
+    start = initial_state(mech)
+    first = trajectory.at(0)
+    for field in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_allclose(getattr(first, field), getattr(start, field), rtol=0,
+                                   atol=1e-12, err_msg=field)
+
+
+@pytest.mark.parametrize("name", ["fourbar", "slider_crank"])
+def test_moving_start_converts_exactly(load_variant, name):
+    """A start away from the reference pose (driver 0.4 rad, 2 rad/s): the joint coordinates
+    solved from the body poses reproduce them (measured 2.9e-15 fourbar, 1.6e-15 slider_crank)."""
+    mech = load_variant(name, [("value = 0.0\nrate = 0.0", "value = 0.4\nrate = 2.0")],
+                        stem=f"{name}_moving")
+    start = initial_state(mech)
+    first = _run(mech, "rk4", 1e-3, 1e-3).at(0)
+    for field in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_allclose(getattr(first, field), getattr(start, field), rtol=0,
+                                   atol=1e-12, err_msg=field)
+
+
+# --- faithfulness ------------------------------------------------------------------------------
+
+_ZERO_SWITCHES = ["armature", "damping", "friction", "rotorInertia", "lowerDryFrictionLimit",
+                  "upperDryFrictionLimit"]
+_UNBOUNDED_SWITCHES = ["effortLimit", "lowerEffortLimit", "upperEffortLimit", "velocityLimit",
+                       "lowerVelocityLimit", "upperVelocityLimit"]
+
+
+@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("switch", _ZERO_SWITCHES)
+def test_engine_default_is_zero(name, switch):
+    assert np.all(getattr(ADAPTER.build(load(name)).model, switch) == 0.0)
+
+
+@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("switch", _UNBOUNDED_SWITCHES)
+def test_limit_is_unbounded(name, switch):
+    # Pinocchio stores "no limit" as ±DBL_MAX (lowerVelocityLimit defaults to +DBL_MAX).
+    limits = getattr(ADAPTER.build(load(name)).model, switch)
+    assert np.all(np.abs(limits) == np.finfo(float).max)
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_constraints_are_rigid(name):
+    for constraint in ADAPTER.build(load(name)).constraints:
+        assert np.all(constraint.retrieveCompliance() == 0.0)
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_default_method_has_no_baumgarte_correction(name):
+    settings = solver_settings(ADAPTER.method_spec("default")[1])
+    problem = ConstrainedProblem(ADAPTER.build(load(name)), settings)
+    for constraint in problem.constraints:
+        gains = constraint.m_baumgarte_parameters
+        assert (gains.Kp, gains.Kd) == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("name", scenario_names())
+def test_inertias_and_gravity_are_the_scenarios(name):
+    mech = load(name)
+    built = ADAPTER.build(mech)
+    model, data = built.model, built.model.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    assert np.array_equal(model.gravity.linear, mech.gravity)
+    for body, frame in zip(mech.bodies, built.body_frames):
+        inertia = model.inertias[model.frames[frame].parentJoint]
+        placement = model.frames[frame].placement
+        assert inertia.mass == body.mass
+        np.testing.assert_allclose(inertia.lever, placement.translation, rtol=0, atol=0)
+        np.testing.assert_allclose(inertia.inertia, body.inertia, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(data.oMf[frame].translation, body.position, atol=1e-14)
+
+
+# --- accuracy ----------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("name, tolerance", [
+    # measured max |Δ crank angle| (rad) over 0.5 s, best at dt = 1e-3 vs best at dt = 2.5e-4:
+    ("fourbar", 5e-9),             # measured 1.08e-9
+    ("slider_crank", 3e-10),       # measured 3.6e-11
+])
+def test_best_agrees_with_a_fine_step(name, tolerance):
+    mech = load(name)
+    coarse = _run(mech, "best", 1e-3, 0.5)
+    fine = _run(mech, "best", 2.5e-4, 0.5)
+    assert coarse.status == fine.status == "ok"
+    angle = output_series(mech, coarse, "crank_angle")
+    reference = output_series(mech, fine, "crank_angle")[::4]
+    assert np.max(np.abs(angle - reference)) < tolerance
+
+
+@pytest.mark.parametrize("name", ["fourbar", "slider_crank", "slider_crank_planar"])
+def test_best_keeps_the_loop_closed(name):
+    mech = load(name)
+    trajectory = _run(mech, "best", 1e-2, 1.0)
+    for joint in ADAPTER.build(mech).tree.cut_joints:
+        # measured 8.4e-13 fourbar, 5.2e-16 slider_crank, 1.04e-12 slider_crank_planar
+        assert _closure_gap(mech, trajectory, joint) < 1e-11
+
+
+def test_planar_and_spatial_fourbar_agree():
+    """Same mechanism, planar (4 revolutes, 1 redundant row) and spatial joint sets: measured
+    max |Δ crank angle| over 1 s at dt = 1e-3 of 1.0e-15 rad."""
+    planar = _run(load("fourbar"), "best", 1e-3, 1.0)
+    spatial = _run(load("fourbar_spatial"), "best", 1e-3, 1.0)
+    difference = output_series(load("fourbar"), planar, "crank_angle") - output_series(
+        load("fourbar_spatial"), spatial, "crank_angle")
+    assert np.max(np.abs(difference)) < 1e-14
+
+
+def test_loads_through_body_wrenches_match_joint_actuation_and_gravity(load_variant):
+    """The crank torque as a body torque and gravity as body forces at the centres of mass
+    reproduce the shipped model (measured max |Δ crank angle| over 0.5 s: 5.6e-16 rad)."""
+    mech = load("fourbar")
+    forces = [(f'[[forces]]\ntype = "joint_torque"\njoint = "O"\nvalue = -1200.0',
+               '[[forces]]\ntype = "body_torque"\nbody = "crank"\ntorque = [0.0, 0.0, -1200.0]'
+               + "".join(f'\n\n[[forces]]\ntype = "body_force"\nbody = "{body.name}"\n'
+                         f'force = [0.0, {-9.81 * body.mass!r}, 0.0]' for body in mech.bodies)),
+              ("gravity = [0.0, -9.81, 0.0]", "gravity = [0.0, 0.0, 0.0]")]
+    variant = load_variant("fourbar", forces, stem="fourbar_wrenches")
+    shipped = _run(mech, "best", 1e-3, 0.5)
+    loaded = _run(variant, "best", 1e-3, 0.5)
+    difference = output_series(mech, shipped, "crank_angle") - output_series(
+        variant, loaded, "crank_angle")
+    assert np.max(np.abs(difference)) < 5e-15
+
+
+# --- failures are results ----------------------------------------------------------------------
+
+@pytest.mark.parametrize("name", ["fourbar", "slider_crank_planar"])
+def test_default_fails_on_a_redundant_planar_closure(name):
+    """ProximalSettings() (mu = 0, one iteration) meets the singular KKT matrix of a planar loop
+    closed by a 3D point: Pinocchio returns NaN at the first evaluation."""
+    trajectory = _run(load(name), "default", 1e-3, 0.01)
+    assert trajectory.status == "failed"
+    assert "non-finite" in trajectory.reason and "mu = 0" in trajectory.reason
+    assert trajectory.failure_time == pytest.approx(1e-3)
+    assert trajectory.n_samples == 1
+
+
+def test_stiff_baumgarte_diverges_with_its_time():
+    """Kp = 1e6 at dt = 1e-2 puts the corrector's eigenvalues far outside RK4's stability
+    region: measured diverged at t = 0.05 s (state norm above the integrator's 1e8 limit)."""
+    trajectory = _run(load("fourbar"), "baumgarte:kp=1e6,kd=0", 1e-2, 1.0)
+    assert trajectory.status == "diverged"
+    assert trajectory.failure_time == pytest.approx(0.05)
+    assert trajectory.times[-1] < trajectory.failure_time
+
+
+def test_unreachable_start_fails_with_reason(monkeypatch):
+    """Body velocities no joint state produces (the crank sliding off its pivot) are caught by
+    the round-trip check and end the run as ``failed`` at t = 0."""
+    mech = load("fourbar")
+
+    def drifting_start(mechanism):
+        state = initial_state(mechanism)
+        state.velocity[0] += (0.0, 0.0, 1.0)
+        return state
+
+    monkeypatch.setattr("adapters.pinocchio_adapter.adapter.initial_state", drifting_start)
+    trajectory = _run(mech, "best", 1e-3, 0.01)
+    assert trajectory.status == "failed"
+    assert trajectory.failure_time == 0.0
+    assert "not representable" in trajectory.reason
