@@ -5,7 +5,9 @@ routes on the same dense time grid:
 
 * route A: coordinate partitioning (the constraints hold to Newton tolerance at every evaluation)
   integrated by DOP853 at rtol = atol = 1e-12 (:data:`ROUTE_A`);
-* route B: SUNDIALS IDA on the stabilised index-2 (GGL) DAE in all coordinates (:data:`ROUTE_B`).
+* route B: SUNDIALS IDA on the stabilised index-2 (GGL) DAE in all coordinates (:data:`ROUTE_B`),
+  at rtol = atol = 1e-13 (at 1e-12 it stays 1.3–4.2e-9 from DOP853 on the four-bar; tighter than
+  1e-13 its corrector fails).
 
 Their largest difference over the whole run — every named output and every body's centre-of-mass
 position, in rad and m — is stored with the reference and must not exceed
@@ -32,7 +34,7 @@ REFERENCE_VERSION = 1
 GRID_STEP = 1e-3
 AGREEMENT_LIMIT = 1e-9
 ROUTE_A = "dop853+partition:rtol=1e-12,atol=1e-12"
-ROUTE_B = "ida:rtol=1e-12,atol=1e-12"
+ROUTE_B = "ida:rtol=1e-13,atol=1e-13,max_steps=5000000"
 _ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")
 
 
@@ -55,13 +57,24 @@ def _paths(mech: Mechanism) -> tuple[Path, Path]:
     return cache_dir() / f"{stem}.npz", cache_dir() / f"{stem}.json"
 
 
+_POSITION_LEVEL = ("joint_angle", "joint_position", "position")
+
+
 def route_difference(mech: Mechanism, a: Trajectory, b: Trajectory) -> dict:
-    """Largest differences between two trajectories on the same grid (rad, m)."""
-    outputs = {o.name: float(np.abs(output_series(mech, a, o.name)
-                                    - output_series(mech, b, o.name)).max()) for o in mech.outputs}
-    return {"outputs": outputs,
-            "body_position_m": float(np.abs(a.position - b.position).max()),
-            "max": max([*outputs.values(), float(np.abs(a.position - b.position).max())])}
+    """Largest differences between two trajectories on the same grid.
+
+    ``max`` covers the position-level quantities the agreement limit applies to (outputs in rad
+    or m and every body's centre of mass, m); velocity-level outputs (rad/s, m/s) are reported
+    under ``velocity_outputs`` for information.
+    """
+    def difference(name):
+        return float(np.abs(output_series(mech, a, name) - output_series(mech, b, name)).max())
+
+    position = {o.name: difference(o.name) for o in mech.outputs if o.kind in _POSITION_LEVEL}
+    velocity = {o.name: difference(o.name) for o in mech.outputs if o.kind not in _POSITION_LEVEL}
+    bodies = float(np.abs(a.position - b.position).max())
+    return {"outputs": position, "velocity_outputs": velocity, "body_position_m": bodies,
+            "max": max([*position.values(), bodies])}
 
 
 def _run_route(mech: Mechanism, method: str, grid: np.ndarray) -> Trajectory:

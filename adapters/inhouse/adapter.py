@@ -85,8 +85,7 @@ class InhouseAdapter(Adapter):
                  sample_times: np.ndarray) -> Trajectory:
         spec, params = self.method_spec(method)
         if spec.name == "ida":
-            from adapters.inhouse.dae import simulate_ida_trajectory
-            return simulate_ida_trajectory(model, t_end, sample_times, **params)
+            return _ida_trajectory(model, t_end, sample_times, params)
         integrator, strategy = _split(spec.name)
         formulation = FORMULATIONS[strategy]
         own = {k: v for k, v in params.items() if k in formulation.defaults}
@@ -96,3 +95,25 @@ class InhouseAdapter(Adapter):
         except (ArithmeticError, np.linalg.LinAlgError, ValueError) as error:
             return Trajectory.empty(len(model.bodies), status="failed",
                                     reason=f"{type(error).__name__}: {error}", failure_time=0.0)
+
+
+def _ida_trajectory(mech: Mechanism, t_end: float, sample_times, params: dict) -> Trajectory:
+    """Run IDA from the assembled state and convert its samples to body states."""
+    import time
+
+    from adapters.inhouse.constraints import layout_of
+    from adapters.inhouse.dae import simulate_ida
+    from adapters.inhouse.kinematics import assemble
+    from adapters.inhouse.states import body_states
+
+    assembly = assemble(mech)
+    began = time.perf_counter()
+    result = simulate_ida(mech, assembly.q, assembly.v, t_end, sample_times, **params)
+    wall = time.perf_counter() - began
+    layout = layout_of(mech)
+    states = [body_states(layout, q, v) for q, v in zip(result.q, result.v)]
+    counters = {k: v for k, v in result.counters.items() if k != "steps" and v is not None}
+    return Trajectory.from_samples(
+        result.times, states, status=result.status, reason=result.reason or "",
+        failure_time=result.failure_time, wall_time_s=wall,
+        steps=result.counters.get("steps", 0), counters=counters)

@@ -209,7 +209,7 @@ class DaeModel:
         return y0, yp0
 
     def _coupled(self, t, q, v, vdot, lam, mu):
-        """Terms differentiated with respect to q: (M v̇ − Q + Φ_qᵀλ, Φ_qᵀμ, Φ_q v), (n + n + m,)."""
+        """(M v̇ − Q + Φ_qᵀλ, Φ_qᵀμ, Φ_q v), shape (n + n + m,); index 3: the first, (n,)."""
         mass, force = self.dynamics.mass_and_forces(t, q, v)
         jac = self.jacobian(q, t)
         if self.form == "index3":

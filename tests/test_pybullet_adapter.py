@@ -1,0 +1,268 @@
+"""PyBullet adapter: build, start state, faithfulness switches, accuracy, failure as data.
+
+Tolerances come from measurements on this machine (pybullet 3.2.7); each one names the value
+measured and the margin.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pybullet
+import pytest
+
+from adapters.base import UnsupportedCase
+from adapters.pybullet_adapter import PybulletAdapter, bullet_world
+from harness.initial import initial_state
+from harness.model import Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism
+from harness.scenario import load, scenario_names
+from harness.trajectory import Trajectory
+
+ADAPTER = PybulletAdapter()
+SCENARIOS = scenario_names()
+METHODS = [spec.name for spec in ADAPTER.methods()]
+
+#: The notes each shipped scenario's model must carry (what Bullet does differently).
+EXPECTED_NOTES = {
+    "fourbar": "1 redundant closure equation(s)",
+    "slider_crank_planar": "1 redundant closure equation(s)",
+    "fourbar_spatial": "cylindrical joint 'C' built as a prismatic and a revolute joint",
+    "slider_crank": "universal joint 'U' built as two revolute joints",
+}
+
+
+def _params(method: str) -> dict:
+    return ADAPTER.method_spec(method)[1]
+
+
+def _wheel(rate: float, joint_type: str = "revolute", gravity=(0.0, 0.0, 0.0)) -> Mechanism:
+    """One body on a joint at its centre of mass (revolute about z) or at 1 m from it."""
+    inertia = np.diag([0.5, 0.7, 0.9])
+    offset = np.zeros(3) if joint_type == "revolute" else np.array([1.0, 0.0, 0.0])
+    z = np.array([0.0, 0.0, 1.0])
+    x = np.array([1.0, 0.0, 0.0])
+    body = Body("wheel", 2.0, inertia, offset, np.eye(3))
+    joint = Joint("O", joint_type, "ground", "wheel", np.zeros(3), -offset, z, z, x, x)
+    return Mechanism(name=f"wheel_{joint_type}_{rate}", kind="spatial", bodies=(body,),
+                     joints=(joint,), forces=(), gravity=np.asarray(gravity, dtype=float),
+                     initial=InitialState("O", 0.0, rate if joint_type == "revolute" else 0.0),
+                     duration=1.0, outputs=(), content_hash=f"pybullet-test-{joint_type}-{rate}")
+
+
+def _spin_rate(mech: Mechanism, t_end: float, dt: float = 1e-3) -> Trajectory:
+    model = ADAPTER.build(mech)
+    return ADAPTER.simulate(model, "default", dt, t_end, np.array([0.0, t_end]))
+
+
+def _crank_angle(mech: Mechanism, trajectory: Trajectory) -> np.ndarray:
+    """Rotation of the crank about joint O since t = 0 (rad), unwrapped."""
+    from scipy.spatial.transform import Rotation
+
+    joint = mech.joint("O")
+    crank = mech.body_index("crank")
+    rotations = Rotation.from_quat(np.roll(trajectory.quaternion[:, crank], -1, axis=1))
+    relative = rotations * Rotation.from_matrix(mech.bodies[crank].rotation).inv()
+    return np.unwrap(relative.as_rotvec() @ joint.axis1)
+
+
+# -------------------------------------------------------------------------------------------
+# Build
+# -------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_build_every_shipped_scenario(scenario):
+    model = ADAPTER.build(load(scenario))
+    assert len(model.body_links) == len(load(scenario).bodies)
+    assert any(EXPECTED_NOTES[scenario] in note for note in model.notes)
+
+
+def test_spatial_revolute_cut_is_unsupported_with_reason():
+    mech = load("fourbar_spatial")
+    joints = tuple(dataclasses.replace(j, type="revolute") if j.name in ("B", "C") else j
+                   for j in mech.joints)
+    with pytest.raises(UnsupportedCase, match="closes loops only with point-to-point"):
+        ADAPTER.build(dataclasses.replace(mech, joints=joints))
+
+
+def test_unknown_method_lists_valid_ones():
+    model = ADAPTER.build(load("fourbar"))
+    with pytest.raises(ValueError, match="default, best, substeps"):
+        ADAPTER.simulate(model, "nonsense", 1e-2, 0.1, np.array([0.0]))
+
+
+# -------------------------------------------------------------------------------------------
+# Start state
+# -------------------------------------------------------------------------------------------
+
+def _start_cases():
+    """Shipped scenarios at rest, and each driven to 0.3 rad at 2 rad/s (moving start)."""
+    for scenario in SCENARIOS:
+        yield pytest.param(scenario, None, id=f"{scenario}-reference")
+        yield pytest.param(scenario, InitialState("O", 0.3, 2.0), id=f"{scenario}-moving")
+
+
+@pytest.mark.parametrize("scenario, initial", list(_start_cases()))
+@pytest.mark.parametrize("method", METHODS)
+def test_first_sample_is_the_harness_initial_state(scenario, initial, method):
+    mech = load(scenario)
+    if initial is not None:
+        mech = dataclasses.replace(mech, initial=initial, content_hash=f"{scenario}-moving")
+    trajectory = ADAPTER.simulate(ADAPTER.build(mech), method, 1e-3, 0.0, np.array([0.0]))
+    start = initial_state(mech)
+    assert trajectory.status == "ok", trajectory.reason
+    for field in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_allclose(getattr(trajectory, field)[0], getattr(start, field),
+                                   rtol=0, atol=1e-12, err_msg=field)
+
+
+# -------------------------------------------------------------------------------------------
+# Faithfulness switches
+# -------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_inertia_set_explicitly(scenario):
+    mech = load(scenario)
+    model = ADAPTER.build(mech)
+    with bullet_world(model, _params("default"), 1e-3) as world:
+        for index, body in enumerate(mech.bodies):
+            info = pybullet.getDynamicsInfo(world.body, model.body_links[index],
+                                            physicsClientId=world.client)
+            assert info[0] == body.mass
+            np.testing.assert_allclose(sorted(info[2]), sorted(np.linalg.eigvalsh(body.inertia)),
+                                       rtol=1e-15)
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_joint_damping_and_friction_are_zero(scenario):
+    model = ADAPTER.build(load(scenario))
+    with bullet_world(model, _params("default"), 1e-3) as world:
+        for link in range(len(model.links)):
+            info = pybullet.getJointInfo(world.body, link, physicsClientId=world.client)
+            assert (info[6], info[7]) == (0.0, 0.0)
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_no_collision_shapes_so_no_contacts(scenario):
+    model = ADAPTER.build(load(scenario))
+    with bullet_world(model, _params("default"), 1e-3) as world:
+        for link in range(-1, len(model.links)):
+            assert pybullet.getCollisionShapeData(world.body, link,
+                                                  physicsClientId=world.client) == ()
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_constraint_force_cap_is_lifted(scenario):
+    model = ADAPTER.build(load(scenario))
+    with bullet_world(model, _params("default"), 1e-3) as world:
+        assert world.constraints
+        for cid in world.constraints:
+            info = pybullet.getConstraintInfo(cid, physicsClientId=world.client)
+            assert info[10] >= 1e29  # maxAppliedForce; PyBullet's default is 500
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_velocity_motors_apply_no_torque(scenario):
+    model = ADAPTER.build(load(scenario))
+    with bullet_world(model, _params("default"), 1e-3) as world:
+        for _ in range(50):
+            pybullet.stepSimulation(physicsClientId=world.client)
+        for link in range(len(model.links)):
+            state = pybullet.getJointState(world.body, link, physicsClientId=world.client)
+            assert state[3] == 0.0  # appliedJointMotorTorque
+
+
+def test_no_damping_spin_rate_is_kept():
+    # A balanced wheel spinning at 5 rad/s without gravity: Bullet's default damping (0.04)
+    # would slow it; measured change over 1 s: 0 to the last bit (< 1e-13 allowed).
+    trajectory = _spin_rate(_wheel(5.0), 1.0)
+    np.testing.assert_allclose(trajectory.angular_velocity[-1, 0], [0.0, 0.0, 5.0], atol=1e-13)
+
+
+def test_no_joint_velocity_clamp():
+    # PyBullet clamps joint speeds to 100 rad/s by default; 300 rad/s must survive.
+    trajectory = _spin_rate(_wheel(300.0), 0.1)
+    np.testing.assert_allclose(trajectory.angular_velocity[-1, 0], [0.0, 0.0, 300.0], atol=1e-10)
+
+
+def test_no_sleeping():
+    # Bullet puts a body moving slower than its sleep threshold to sleep after 2 s; a wheel
+    # at 0.01 rad/s must turn by 0.03 rad in 3 s.
+    trajectory = _spin_rate(_wheel(0.01), 3.0)
+    np.testing.assert_allclose(trajectory.angular_velocity[-1, 0], [0.0, 0.0, 0.01], atol=1e-15)
+
+
+def test_spherical_joint_motor_is_off():
+    # A pendulum on a spherical tree joint, released horizontally: PyBullet's spherical joint
+    # motor (1000 N·s per step by default) would hold it up.  Free fall of the centre of mass
+    # at first: after 0.05 s, v_y ≈ −g t · m r² / (m r² + I_zz) = −0.338 m/s (measured −0.338).
+    trajectory = _spin_rate(_wheel(0.0, "spherical", gravity=(0.0, -9.81, 0.0)), 0.05)
+    assert trajectory.velocity[-1, 0, 1] == pytest.approx(-0.338, abs=0.01)
+
+
+def test_default_method_is_pybullet_untouched():
+    # `default` sets every parameter explicitly; the run must equal one that sets none.
+    model = ADAPTER.build(load("fourbar"))
+    states = []
+    for params in (_params("default"), None):
+        with bullet_world(model, params, 1e-2) as world:
+            for _ in range(100):
+                pybullet.setJointMotorControl2(world.body, 0, pybullet.TORQUE_CONTROL,
+                                               force=-1200.0, physicsClientId=world.client)
+                pybullet.stepSimulation(physicsClientId=world.client)
+            states.append(pybullet.getLinkStates(world.body, list(model.body_links),
+                                                 computeLinkVelocity=1,
+                                                 physicsClientId=world.client))
+    assert states[0] == states[1]
+
+
+# -------------------------------------------------------------------------------------------
+# Accuracy and failure
+# -------------------------------------------------------------------------------------------
+
+#: Max crank-angle difference (rad) over the first second, `best` at dt = 1e-3 against `best`
+#: at dt = 1e-4.  Measured: fourbar 1.79e-3, fourbar_spatial 1.79e-3, slider_crank 4.13e-3,
+#: slider_crank_planar 5.27e-3; allowed ≈ 3.5×.
+BEST_AGREEMENT = {
+    "fourbar": 6e-3,
+    "fourbar_spatial": 6e-3,
+    "slider_crank": 1.5e-2,
+    "slider_crank_planar": 2e-2,
+}
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_best_converges_with_the_step(scenario):
+    mech = load(scenario)
+    model = ADAPTER.build(mech)
+    times = np.round(np.arange(0.0, 1.0 + 1e-9, 0.01), 10)
+    coarse = ADAPTER.simulate(model, "best", 1e-3, 1.0, times)
+    fine = ADAPTER.simulate(model, "best", 1e-4, 1.0, times)
+    assert (coarse.status, fine.status) == ("ok", "ok")
+    error = np.max(np.abs(_crank_angle(mech, coarse) - _crank_angle(mech, fine)))
+    assert error < BEST_AGREEMENT[scenario]
+
+
+@pytest.mark.parametrize("scenario", ["fourbar", "slider_crank_planar"])
+def test_blow_up_is_diverged_with_its_time(scenario):
+    # PyBullet's MLCP projected Gauss-Seidel solver (constraintSolverType=2) blows these loops
+    # up within the first step (measured: non-finite state after step 1 at dt = 1e-3).
+    model = ADAPTER.build(load(scenario))
+    times = np.round(np.arange(0.0, 0.1 + 1e-9, 1e-3), 10)
+    trajectory = ADAPTER.simulate(model, "default:constraintSolverType=2", 1e-3, 0.1, times)
+    assert trajectory.status == "diverged"
+    assert trajectory.failure_time == pytest.approx(1e-3)
+    assert trajectory.n_samples == 1
+
+
+@pytest.mark.parametrize("load, rate", [
+    # Pure torque 2 N·m about z on the balanced wheel (I_zz = 0.9): ω = 2/0.9 · t exactly.
+    (BodyTorque("wheel", np.array([0.0, 0.0, 2.0])), 2.0 / 0.9 * 0.1),
+    # 1 N along y at the body point (1, 0, 0): torque 1·cos θ with θ ≤ 5.6e-3 rad over 0.1 s,
+    # so ω = t/0.9 lowered by ≈ 3e-6 relative; measured 0.11111077 (−3.1e-6) → 1e-5 allowed.
+    (BodyForce("wheel", np.array([0.0, 1.0, 0.0]), np.array([1.0, 0.0, 0.0])), 1.0 / 0.9 * 0.1),
+])
+def test_body_loads_are_applied_every_step(load, rate):
+    mech = dataclasses.replace(_wheel(0.0), forces=(load,), content_hash="pybullet-test-loads")
+    trajectory = _spin_rate(mech, 0.1)
+    assert trajectory.angular_velocity[-1, 0, 2] == pytest.approx(rate, rel=1e-5)
