@@ -15,13 +15,15 @@ import numpy as np
 
 from adapters.base import Adapter, MethodSpec, parse_method
 from adapters.inhouse import driver
-from adapters.inhouse.integrators import integrator_names, integrator_params
+from adapters.inhouse.integrators import integrator_class, integrator_names, integrator_params
+from adapters.inhouse.newton_euler import NewtonEuler
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import STRATEGIES
 from harness.model import Mechanism
 from harness.trajectory import Trajectory
 
-FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning}
+FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning,
+                NewtonEuler.name: NewtonEuler}
 
 #: What a user gets without choosing: the seed comparison's classic setting (α = β = 5).
 DEFAULT_METHOD = "rk4+baumgarte"
@@ -88,6 +90,9 @@ class InhouseAdapter(Adapter):
             return _ida_trajectory(model, t_end, sample_times, params)
         integrator, strategy = _split(spec.name)
         formulation = FORMULATIONS[strategy]
+        reason = formulation.unsupported_reason(model, integrator_class(integrator))
+        if reason:
+            return Trajectory.empty(len(model.bodies), status="unsupported", reason=reason)
         own = {k: v for k, v in params.items() if k in formulation.defaults}
         rest = {k: v for k, v in params.items() if k not in formulation.defaults}
         try:

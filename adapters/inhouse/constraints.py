@@ -160,6 +160,9 @@ class ConstraintSystem:
     ----------
     m : int
         Number of equations.  ``labels`` names each one (``"joint B (revolute): point x"``).
+    n_joint_equations : int
+        The first ``n_joint_equations`` rows are the joints'; Euler-parameter normalisation rows
+        (spatial) and the driver row follow.
     """
 
     def __init__(self, mech: Mechanism, with_driver: bool = False, drive=(0.0, 0.0)):
@@ -168,10 +171,10 @@ class ConstraintSystem:
         tb = _TableBuilder(mech, 2 if mech.planar else 3)
         for joint in mech.joints:
             _add_joint(tb, joint)
+        self.n_joint_equations = tb.m
         if not mech.planar:
             for body in mech.bodies:
                 tb.add(kernels.NORM, body.name, GROUND, f"body {body.name}: θᵀθ = 1")
-        self.n_joint_equations = tb.m
         if with_driver:
             _add_driver(tb, mech.joint(mech.initial.driver))
         self.m = tb.m

@@ -179,6 +179,12 @@ class Dynamics:
                     force.point2, (force.stiffness, force.damping, force.free_length))
         raise TypeError(f"unknown load {force!r}")
 
+    def applied_forces(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Generalised forces of the load table alone (no gravity, no inertial terms), (n,)."""
+        out = np.zeros(q.size)
+        _applied_forces(out, q, v, self.layout.nc, *self._table)
+        return out
+
     def mass_and_forces(self, t: float, q: np.ndarray, v: np.ndarray):
         """M(q), shape (n, n), and Q_e + Q_v, shape (n,)  (loads are constant in t)."""
         return mass_and_forces_kernel(q, v, self.layout.nc, self.masses, self.inertias,

@@ -63,6 +63,11 @@ class Formulation(SecondOrderSystem):
     description = ""
     defaults: dict = {}
 
+    @classmethod
+    def unsupported_reason(cls, mech: Mechanism, integrator_class) -> str | None:
+        """Why this strategy cannot run ``mech`` with that integrator, or None."""
+        return None
+
     def __init__(self, mech: Mechanism, q0: np.ndarray, dt: float, **params):
         self.mech = mech
         self.dynamics = Dynamics(mech)
@@ -93,6 +98,7 @@ class Formulation(SecondOrderSystem):
 
     # -- the index-1 right-hand side ---------------------------------------------------------
     def acceleration(self, t, q, v):
+        q, v = np.ascontiguousarray(q), np.ascontiguousarray(v)  # solvers may pass slices
         mass, force = self.dynamics.mass_and_forces(t, q, v)
         jac = self.jacobian(t, q)
         self.counters["factorizations"] += 1
@@ -163,6 +169,7 @@ class Penalty(Formulation):
         """Pieces of eq. 116: Q, Φ_q, the factorised M + Φ_qᵀαΦ_q, and the constraint target
         c = γ − 2ΩμΦ̇ − Ω²Φ so that Φ̈ + 2ΩμΦ̇ + Ω²Φ = Φ_q q̈ − c."""
         alpha, omega, mu = self.params["penalty"], self.params["omega"], self.params["mu"]
+        q, v = np.ascontiguousarray(q), np.ascontiguousarray(v)
         mass, force = self.dynamics.mass_and_forces(t, q, v)
         jac = self.jacobian(t, q)
         target = self.gamma(t, q, v) - 2.0 * omega * mu * (jac @ v) - omega ** 2 * self.phi(t, q)
