@@ -1,8 +1,6 @@
-"""Exudyn adapter: the scenario in redundant absolute coordinates, solved by Exudyn's implicit
-second-order integrators at fixed steps.
-
-Like the in-house formulation, Exudyn needs no spanning tree: every body is a node with its own
-coordinates and every scenario joint becomes one Exudyn constraint.
+"""The Exudyn system of one run: :class:`ExudynSystem` translates the mechanism into a fresh
+``SystemContainer`` at the harness's assembled start, runs a solver on it and reads the sensed body
+states back as a :class:`~harness.trajectory.Trajectory`.
 
 Model translation
 -----------------
@@ -22,27 +20,10 @@ Every run builds a fresh ``SystemContainer`` whose reference configuration is th
 assembled start (:func:`harness.initial.initial_state`), so displacement-type outputs of Exudyn are
 never needed: the body states are read through ``SensorBody`` (``storeInternal=True``) as world
 position, rotation matrix, velocity and angular velocity.
-
-Methods
--------
-``default``
-    Exudyn's ``SolveDynamic`` defaults at fixed steps: generalized-α (index 3), spectral radius
-    0.9, modified Newton, relative/absolute tolerance 1e-8/1e-10, at most 25 iterations.
-``newmark``
-    Newmark (``useNewmark``) with Exudyn's default β = 1/4, γ = 1/2, index 3; ``index2=true``
-    switches to velocity-level constraints (Exudyn allows index 2 only with Newmark).
-``trapezoidal``
-    What Exudyn's ``TrapezoidalIndex2`` sets: Newmark β = 1/4, γ = 1/2 with index-2 constraints.
-``best``
-    The most accurate settings measured at a given step (see :data:`_BEST`).
-
-Exudyn's explicit solvers are not offered: with ``eliminateConstraints=True`` they refuse these
-constraints, and with ``eliminateConstraints=False`` they silently ignore the joints.
 """
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import math
 import time
@@ -53,11 +34,10 @@ import exudyn.itemInterface as eii
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.base import Adapter, MethodSpec, UnsupportedCase
+from adapters.exudyn_adapter.state import _quaternion_rate, _quaternions
 from harness.initial import initial_state
 from harness.model import (
     GROUND,
-    PLANAR_JOINT_TYPES,
     BodyForce,
     BodyTorque,
     Joint,
@@ -67,228 +47,7 @@ from harness.model import (
 )
 from harness.trajectory import Trajectory
 
-#: Newton and integrator settings shared by every method; the values are Exudyn's defaults for
-#: ``SolveDynamic`` (``exu.SimulationSettings().timeIntegration``), read from exudyn 1.13.6.
-_COMMON_PARAMS = {
-    "rtol": 1e-8,              # newton.relativeTolerance
-    "atol": 1e-10,             # newton.absoluteTolerance
-    "max_iter": 25,            # newton.maxIterations
-    "modified_newton": True,   # newton.useModifiedNewton
-    "rotation": "ep",          # spatial nodes: "ep" (NodeRigidBodyEP) or "rotvec" (RotVecLG)
-    "ignore_singular": False,  # ignoreSingularJacobian with EigenDense (redundant constraints)
-}
-_ROTATIONS = ("ep", "rotvec")
-#: Generalized-α (index 3): Exudyn's default spectralRadius.
-_GENALPHA_PARAMS = {"rho_inf": 0.9, **_COMMON_PARAMS}
-#: Newmark: Exudyn's default newmarkBeta/newmarkGamma (undamped trapezoidal rule), index 3.
-_NEWMARK_PARAMS = {"beta": 0.25, "gamma": 0.5, "index2": False, **_COMMON_PARAMS}
-#: The most accurate settings measured (see tests/test_exudyn_adapter.py).
-_BEST = {**_GENALPHA_PARAMS, "rtol": 1e-12, "atol": 1e-12, "modified_newton": False,
-         "ignore_singular": True}
-
 _SENSED = ("Position", "RotationMatrix", "Velocity", "AngularVelocity")
-
-
-@dataclass(frozen=True)
-class ExudynModel:
-    """What :meth:`ExudynAdapter.build` returns: the mechanism, checked for Exudyn.
-
-    Each :meth:`ExudynAdapter.simulate` call builds a fresh Exudyn system from it, so one model
-    serves any number of runs.
-
-    Attributes
-    ----------
-    mechanism : Mechanism
-    _unenforced_joints : bool
-        Test-only hook: run Exudyn's explicit RK4 with ``eliminateConstraints=False``, the known
-        trap in which Exudyn ignores every joint while reporting success.  Never offered as a method.
-    """
-
-    mechanism: Mechanism
-    _unenforced_joints: bool = False
-
-
-class ExudynAdapter(Adapter):
-    """Exudyn (redundant absolute coordinates, implicit index-3/index-2 integrators)."""
-
-    name = "exudyn"
-
-    def version(self) -> str:
-        return f"exudyn {exu.__version__}"
-
-    def methods(self) -> list[MethodSpec]:
-        return [
-            MethodSpec("default", "Exudyn SolveDynamic defaults at fixed steps: generalized-alpha "
-                       "(index 3), spectral radius 0.9, modified Newton", dict(_GENALPHA_PARAMS)),
-            MethodSpec("newmark", "Newmark (useNewmark), index 3 unless index2=true; "
-                       "gamma > 1/2 damps and is first order", dict(_NEWMARK_PARAMS)),
-            MethodSpec("trapezoidal", "Exudyn TrapezoidalIndex2: undamped Newmark (beta=1/4, "
-                       "gamma=1/2) with index-2 constraints", {**_NEWMARK_PARAMS, "index2": True}),
-            MethodSpec("best", "most accurate measured: generalized-alpha (index 3), full Newton, "
-                       "tolerances 1e-12", dict(_BEST)),
-        ]
-
-    def build(self, mechanism: Mechanism) -> ExudynModel:
-        """Check that Exudyn can represent ``mechanism``.
-
-        Raises
-        ------
-        UnsupportedCase
-            A planar scenario with a joint type Exudyn has no 2D joint for.
-        """
-        if mechanism.planar:
-            for joint in mechanism.joints:
-                if joint.type not in PLANAR_JOINT_TYPES:
-                    raise UnsupportedCase(f"planar joint {joint.name!r} of type {joint.type!r}: "
-                                          f"Exudyn 2D joints are {', '.join(PLANAR_JOINT_TYPES)}")
-        return ExudynModel(mechanism)
-
-    def simulate(self, model: ExudynModel, method: str, dt: float, t_end: float,
-                 sample_times: np.ndarray) -> Trajectory:
-        """Run ``model`` with ``method`` at the fixed step ``dt`` up to ``t_end``.
-
-        Parameters
-        ----------
-        model : ExudynModel
-        method : str
-            ``NAME[:key=value,...]``, see :meth:`methods`.
-        dt, t_end : float
-            Step and end time, s; ``round(t_end / dt)`` steps are taken.
-        sample_times : ndarray, shape (n_samples,)
-            Integer multiples of ``dt`` (0 included); the state after step ``round(t / dt)`` is
-            recorded for each.
-
-        Returns
-        -------
-        Trajectory
-            ``failed`` when Exudyn raises (e.g. Newton does not converge), ``diverged`` when the
-            states stop being finite; the samples reached are kept.
-        """
-        spec, params = self.method_spec(method)
-        _validate_run(dt, t_end, sample_times)
-        _validate_params(params)
-        mech = model.mechanism
-        steps = round(t_end / dt)
-        indices = np.rint(np.asarray(sample_times, dtype=float) / dt).astype(int)
-        notes = _notes(mech, spec.name, params)
-        with _quiet():
-            try:
-                system = ExudynSystem(mech, params["rotation"])
-                settings = _settings(params, dt, steps, _write_period(indices, dt))
-            except Exception as error:  # engine exceptions are results (DESIGN rule 5)
-                return Trajectory.empty(len(mech.bodies), status="failed",
-                                        reason=f"model rejected: {_describe(error)}",
-                                        failure_time=0.0, notes=notes)
-            solver = _unenforced_solver(settings) if model._unenforced_joints \
-                else exu.MainSolverImplicitSecondOrder()
-            run = system.run(solver, settings, dt)
-        return system.trajectory(run, indices, dt, notes)
-
-
-# ---------------------------------------------------------------------------------------------
-# validation
-
-
-def _validate_run(dt: float, t_end: float, sample_times) -> None:
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive finite step, got {dt!r}")
-    if not (np.isfinite(t_end) and round(t_end / dt) >= 1):
-        raise ValueError(f"t_end must be a finite time of at least one step dt, got {t_end!r}")
-    times = np.asarray(sample_times, dtype=float)
-    if times.ndim != 1 or times.size == 0:
-        raise ValueError("sample_times must be a non-empty 1-D array of times")
-    k = times / dt
-    if np.any(np.abs(k - np.rint(k)) > 1e-6) or np.any(times < 0) or np.any(times > t_end + dt / 2):
-        raise ValueError("sample_times must be integer multiples of dt within [0, t_end]")
-
-
-def _validate_params(params: dict) -> None:
-    if params.get("rotation", "ep") not in _ROTATIONS:
-        raise ValueError(f"parameter 'rotation' must be one of {', '.join(_ROTATIONS)}, "
-                         f"got {params['rotation']!r}")
-    if "rho_inf" in params and not 0.0 <= params["rho_inf"] <= 1.0:
-        raise ValueError(f"parameter 'rho_inf' must lie in [0, 1], got {params['rho_inf']!r}")
-    if "gamma" in params and not (params["gamma"] >= 0.5 and params["beta"] > 0):
-        raise ValueError(f"parameters 'beta' > 0 and 'gamma' >= 1/2 required, got "
-                         f"beta={params['beta']!r}, gamma={params['gamma']!r}")
-    for key in ("rtol", "atol"):
-        if not params[key] > 0:
-            raise ValueError(f"parameter {key!r} must be positive, got {params[key]!r}")
-    if params["max_iter"] < 1:
-        raise ValueError(f"parameter 'max_iter' must be at least 1, got {params['max_iter']!r}")
-
-
-def _notes(mech: Mechanism, name: str, params: dict) -> list[str]:
-    if mech.planar:
-        return [f"exudyn {name}: planar model with NodeRigidBody2D "
-                f"(parameter 'rotation' is not used)"]
-    node = "NodeRigidBodyEP" if params["rotation"] == "ep" else "NodeRigidBodyRotVecLG"
-    return [f"exudyn {name}: spatial model with {node}"]
-
-
-# ---------------------------------------------------------------------------------------------
-# settings
-
-
-def _write_period(indices: np.ndarray, dt: float) -> float:
-    """Sensor period: the largest multiple of ``dt`` that hits every sampled step, s."""
-    steps = int(np.gcd.reduce(indices[indices > 0])) if np.any(indices > 0) else 1
-    return steps * dt
-
-
-def _settings(params: dict, dt: float, steps: int,
-              write_period: float) -> exu.SimulationSettings:
-    """Exudyn settings for ``steps`` fixed steps of ``dt``: generalized-α when ``params`` has
-    ``rho_inf``, Newmark otherwise."""
-    settings = exu.SimulationSettings()
-    settings.solution.file.write = False
-    settings.solution.sensors.writePeriod = write_period
-    settings.show.statistics = False
-    settings.show.computationTime = False
-    if params["ignore_singular"]:
-        # only honoured by Eigen's full-pivot LU: with the default EXUdense it has no effect
-        settings.linearSolver.solverType = exu.LinearSolverType.EigenDense
-        settings.linearSolver.ignoreSingularJacobian = True
-    integration = settings.timeIntegration
-    integration.verboseMode = 0
-    integration.startTime = 0.0
-    integration.endTime = steps * dt
-    integration.numberOfSteps = steps
-    integration.adaptiveStep = False
-    integration.automaticStepSize = False
-    newton = integration.newton
-    newton.relativeTolerance = params["rtol"]
-    newton.absoluteTolerance = params["atol"]
-    newton.maxIterations = params["max_iter"]
-    newton.useModifiedNewton = params["modified_newton"]
-    alpha = integration.generalizedAlpha
-    integration.solverType = exu.DynamicSolverType.GeneralizedAlpha
-    if "rho_inf" in params:
-        alpha.spectralRadius = params["rho_inf"]
-    else:
-        alpha.useNewmark = True
-        alpha.newmarkBeta = params["beta"]
-        alpha.newmarkGamma = params["gamma"]
-        alpha.useIndex2Constraints = params["index2"]
-    return settings
-
-
-def _unenforced_solver(settings: exu.SimulationSettings) -> exu.MainSolverExplicit:
-    """The trap the tests must catch: explicit RK4 that drops the constraints without a word."""
-    settings.timeIntegration.solverType = exu.DynamicSolverType.RK44
-    settings.timeIntegration.explicit.eliminateConstraints = False
-    return exu.MainSolverExplicit()
-
-
-@contextlib.contextmanager
-def _quiet():
-    """Keep Exudyn from printing to the console for the duration of a run."""
-    previous = exu.config.printToConsole
-    exu.config.printToConsole = False
-    try:
-        yield
-    finally:
-        exu.config.printToConsole = previous
 
 
 def _describe(error: BaseException) -> str:
@@ -297,7 +56,7 @@ def _describe(error: BaseException) -> str:
 
 
 # ---------------------------------------------------------------------------------------------
-# kinematic helpers
+# joint frames
 
 
 def _frame(first: np.ndarray, second: np.ndarray) -> np.ndarray:
@@ -332,28 +91,6 @@ _GENERIC_AXES = {
     "translational": [0, 1, 1, 1, 1, 1],
     "universal": [1, 1, 1, 1, 0, 0],
 }
-
-
-def _quaternion_rate(quaternion: np.ndarray, omega: np.ndarray) -> np.ndarray:
-    """Euler-parameter rates θ̇ = ½ [0, ω] ⊗ θ for a world angular velocity, shape (4,)."""
-    w, x, y, z = quaternion
-    wx, wy, wz = omega
-    return 0.5 * np.array([-wx * x - wy * y - wz * z,
-                           wx * w + wy * z - wz * y,
-                           -wx * z + wy * w + wz * x,
-                           wx * y - wy * x + wz * w])
-
-
-def _quaternions(rotations: np.ndarray, reference: np.ndarray) -> np.ndarray:
-    """Scalar-first quaternions of ``rotations`` (shape (n, 3, 3)), signs continuous from
-    ``reference`` (shape (4,)); shape (n, 4)."""
-    quats = Rotation.from_matrix(rotations).as_quat(scalar_first=True)
-    previous = reference
-    for i, quat in enumerate(quats):
-        if np.dot(quat, previous) < 0:
-            quats[i] = -quat
-        previous = quats[i]
-    return quats
 
 
 # ---------------------------------------------------------------------------------------------
