@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from adapters.inhouse import kernels
 from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
 from adapters.inhouse.constraints import layout_of
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
@@ -185,10 +186,14 @@ class Dynamics:
         _applied_forces(out, q, v, self.layout.nc, *self._table)
         return out
 
+    @property
+    def kernel_args(self) -> tuple:
+        """Arguments after (q, v) of :func:`mass_and_forces_kernel`."""
+        return (self.layout.nc, self.masses, self.inertias, self.gravity, *self._table)
+
     def mass_and_forces(self, t: float, q: np.ndarray, v: np.ndarray):
         """M(q), shape (n, n), and Q_e + Q_v, shape (n,)  (loads are constant in t)."""
-        return mass_and_forces_kernel(q, v, self.layout.nc, self.masses, self.inertias,
-                                      self.gravity, *self._table)
+        return mass_and_forces_kernel(q, v, *self.kernel_args)
 
 
 @njit(cache=True)
@@ -208,3 +213,19 @@ def solve_augmented(mass, jacobian, force, gamma):
     rhs = np.concatenate((force, gamma))
     solution = np.linalg.solve(matrix, rhs)
     return solution[:n], solution[n:]
+
+
+@njit(cache=True)
+def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_args):
+    """q̈ of the augmented index-1 form with Baumgarte terms, in one compiled call.
+
+    Solves [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ − 2αΦ̇ − β²Φ] on the independent constraint ``rows``
+    (002 eq. 77 and 110; α = β = 0 is the unstabilised form).  ``constraint_args`` are
+    :attr:`ConstraintSystem.kernel_args`, ``dynamics_args`` :attr:`Dynamics.kernel_args`.
+    """
+    mass, force = mass_and_forces_kernel(q, v, *dynamics_args)
+    jac = kernels.jacobian(q, t, *constraint_args)[rows]
+    target = kernels.gamma(q, v, t, *constraint_args)[rows]
+    if alpha != 0.0 or beta != 0.0:
+        target = target - 2.0 * alpha * (jac @ v) - beta * beta * kernels.phi(q, t, *constraint_args)[rows]
+    return solve_augmented(mass, jac, force, target)[0]

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.inhouse.dynamics import solve_augmented
 from adapters.inhouse.integrators.base import StepFailure
 from adapters.inhouse.linalg import solve, solve_matrix
 from adapters.inhouse.rank import full_pivot_elimination
@@ -105,7 +104,4 @@ class CoordinatePartitioning(Formulation):
     # -- the reduced problem -------------------------------------------------------------------
     def acceleration(self, t, q_ind, v_ind):
         q, v = self.expand(t, q_ind, v_ind)
-        mass, force = self.dynamics.mass_and_forces(t, q, v)
-        self.counters["factorizations"] += 1
-        acc, _ = solve_augmented(mass, self.jacobian(t, q), force, self.gamma(t, q, v))
-        return acc[self.independent]
+        return super().acceleration(t, q, v)[self.independent]

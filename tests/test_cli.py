@@ -1,0 +1,64 @@
+"""The `mbh` command line: JSON contract of `simulate`, listings, and user errors."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from harness import cli
+
+REQUIRED = {"status", "reason", "failure_time", "wall_time_s", "steps", "rhs_evals", "outputs",
+            "max_constraint_violation", "max_velocity_violation", "max_energy_error_J",
+            "output_errors"}
+
+
+def run_json(capsys, *argv):
+    status = cli.main([*argv, "--json"])
+    return status, json.loads(capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("adapter", ["inhouse", "mujoco", "pybullet", "pinocchio", "exudyn"])
+def test_simulate_json_holds_the_harness_metrics(capsys, adapter):
+    status, result = run_json(capsys, "simulate", "fourbar", "--adapter", adapter,
+                              "--method", "best", "--dt", "0.01", "--t-end", "0.5")
+    assert status == 0
+    assert REQUIRED <= set(result)
+    assert result["status"] == "ok" and result["steps"] == 50
+    assert set(result["outputs"]) == {"crank_angle", "crank_rate"}
+    assert result["output_errors"]["crank_angle"] < 0.1
+
+
+def test_simulate_reports_a_blow_up_as_a_status(capsys):
+    status, result = run_json(capsys, "simulate", "slider_crank_planar", "--method", "euler+none",
+                              "--dt", "0.05")
+    assert status == 0
+    assert result["status"] == "diverged" and 0 < result["failure_time"] <= 4.0
+
+
+def test_check_json_lists_every_scenario(capsys):
+    status, rows = run_json(capsys, "check", "--all")
+    assert status == 0
+    assert [r["scenario"] for r in rows] == ["fourbar", "fourbar_spatial", "slider_crank",
+                                             "slider_crank_planar"]
+    for row in rows:
+        assert {"n_bodies", "n_coordinates", "n_equations", "rank", "mobility", "grubler_mobility",
+                "redundant_equations", "assembly_residual", "jacobian_condition"} <= set(row)
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["methods", "--adapter", "ode"], "unknown adapter 'ode'; valid: inhouse"),
+    (["simulate", "fourbar", "--method", "rk4+nope", "--dt", "0.01"], "unknown stabilisation"),
+    (["simulate", "fourbar", "--dt", "-1"], "--dt must be > 0"),
+    (["simulate", "nosuch", "--dt", "0.01"], "no such scenario file"),
+])
+def test_user_errors_exit_2_without_traceback(capsys, argv, message):
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+def test_methods_lists_default_and_best_for_every_adapter(capsys):
+    for adapter in ("inhouse", "mujoco", "pybullet", "pinocchio", "exudyn"):
+        _, rows = run_json(capsys, "methods", "--adapter", adapter)
+        assert {"default", "best"} <= {r["method"] for r in rows}
