@@ -34,6 +34,11 @@ MEASURED = {
     ("exudyn", "fourbar_spatial", 1e-3): 2.92e-5,
     ("inhouse", "fourbar", 1e-3): 1.13e-9,
     ("inhouse", "fourbar_spatial", 1e-3): 1.21e-9,
+    ("inhouse", "slider_crank_planar", 1e-3): 1.75e-10,
+    ("mujoco", "slider_crank_planar", 1e-3): 7.25e-7,
+    ("pybullet", "slider_crank_planar", 1e-3): 5.87e-3,
+    ("pinocchio", "slider_crank_planar", 1e-3): 1.57e-10,
+    ("exudyn", "slider_crank_planar", 1e-3): 5.05e-5,
 }
 
 

@@ -206,7 +206,7 @@ def test_loads_through_body_wrenches_match_joint_actuation_and_gravity(load_vari
     """The crank torque as a body torque and gravity as body forces at the centres of mass
     reproduce the shipped model (measured max |Δ crank angle| over 0.5 s: 5.6e-16 rad)."""
     mech = load("fourbar")
-    forces = [(f'[[forces]]\ntype = "joint_torque"\njoint = "O"\nvalue = -1200.0',
+    forces = [('[[forces]]\ntype = "joint_torque"\njoint = "O"\nvalue = -1200.0',
                '[[forces]]\ntype = "body_torque"\nbody = "crank"\ntorque = [0.0, 0.0, -1200.0]'
                + "".join(f'\n\n[[forces]]\ntype = "body_force"\nbody = "{body.name}"\n'
                          f'force = [0.0, {-9.81 * body.mass!r}, 0.0]' for body in mech.bodies)),
