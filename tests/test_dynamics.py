@@ -161,3 +161,18 @@ def test_newton_euler_refuses_what_it_cannot_run():
     _, multistep = run("fourbar_spatial", "bdf2+newton-euler", 1e-2, 0.1)
     assert planar.status == multistep.status == "unsupported"
     assert "spatial" in planar.reason and "explicit one-step" in multistep.reason
+
+
+@pytest.mark.slow
+def test_shipped_reference_matches_a_fresh_build():
+    """Rebuilding the four-bar reference from scratch reproduces the shipped file: catches a
+    formulation change made without bumping REFERENCE_VERSION (about a minute)."""
+    from harness.reference import build_reference
+
+    mech = scenario.load("fourbar")
+    fresh, info = build_reference(mech)
+    shipped = reference_trajectory(mech)
+    assert info["agreement"]["max"] <= AGREEMENT_LIMIT
+    assert np.abs(fresh.position - shipped.position).max() <= 1e-12
+    assert np.abs(output_series(mech, fresh, "crank_angle")
+                  - output_series(mech, shipped, "crank_angle")).max() <= 1e-12

@@ -1,8 +1,9 @@
 """Every engine's `best` method against the verified in-house reference, measured by the harness.
 
 MEASURED holds the maximum crank-angle error over the first second (rad), measured on 2026-11-21
-with `benchmarks/engine_table.py`-style runs (see the issue notes); the test allows 3× that, so a
-regression of half an order of magnitude fails while round-off and BLAS differences do not.
+against the shipped version-3 references (`case_metrics`, best method, sample grid of the step);
+the test allows 3× that, so a regression of half an order of magnitude fails while round-off and
+BLAS differences do not.
 """
 
 from __future__ import annotations
@@ -39,6 +40,11 @@ MEASURED = {
     ("pybullet", "slider_crank_planar", 1e-3): 5.87e-3,
     ("pinocchio", "slider_crank_planar", 1e-3): 1.57e-10,
     ("exudyn", "slider_crank_planar", 1e-3): 5.05e-5,
+    ("inhouse", "slider_crank", 1e-3): 5.90e-11,
+    ("mujoco", "slider_crank", 1e-3): 7.75e-7,
+    ("pybullet", "slider_crank", 1e-3): 4.59e-3,
+    ("pinocchio", "slider_crank", 1e-3): 1.81e-10,
+    ("exudyn", "slider_crank", 1e-3): 4.11e-5,
 }
 
 
