@@ -36,7 +36,7 @@ class _Run:
         self.integrator_params = integrator_params
         self.dt = dt
         self.times: list[float] = []
-        self.states = []
+        self.samples: list[tuple[np.ndarray, np.ndarray]] = []
         self.spent = dict.fromkeys(_INTEGRATOR_COUNTERS, 0)
         self.steps = 0
         self.wall = 0.0
@@ -75,8 +75,9 @@ class _Run:
         return self.formulation.expand(t, q, v)
 
     def record(self, t: float, q_full: np.ndarray, v_full: np.ndarray) -> None:
+        """Keep a sample; body states are computed for the whole run at the end."""
         self.times.append(t)
-        self.states.append(body_states(self.layout, q_full, v_full))
+        self.samples.append((np.array(q_full, dtype=float), np.array(v_full, dtype=float)))
 
     def trajectory(self) -> Trajectory:
         self._bank()
@@ -85,10 +86,15 @@ class _Run:
         counters = {key: self.spent[key] + self.formulation.counters.get(key, 0)
                     for key in self.spent}
         counters["repartitions"] = getattr(self.formulation, "repartitions", 0)
-        return Trajectory.from_samples(
-            self.times, self.states, status=status, reason=integrator.failure_reason or "",
-            failure_time=integrator.failure_time, wall_time_s=self.wall, steps=self.steps,
-            counters=counters, notes=list(self.formulation.notes))
+        run = dict(status=status, reason=integrator.failure_reason or "",
+                   failure_time=integrator.failure_time, wall_time_s=self.wall, steps=self.steps,
+                   counters=counters, notes=list(self.formulation.notes))
+        if not self.samples:
+            return Trajectory.empty(self.layout.n_bodies, **run)
+        states = body_states(self.layout, np.stack([q for q, _ in self.samples]),
+                             np.stack([v for _, v in self.samples]))
+        return Trajectory(np.asarray(self.times), states.position, states.quaternion,
+                          states.velocity, states.angular_velocity, **run)
 
 
 def simulate(mech: Mechanism, formulation_class, integrator_name: str, integrator_params: dict,

@@ -25,22 +25,26 @@ def _e_matrix(theta: np.ndarray) -> np.ndarray:
 
 
 def body_states(layout: Layout, q: np.ndarray, v: np.ndarray) -> BodyStates:
-    """World body states from absolute coordinates q, q̇ (each shape (n,))."""
-    blocks_q = q.reshape(layout.n_bodies, layout.nc)
-    blocks_v = v.reshape(layout.n_bodies, layout.nc)
-    nb = layout.n_bodies
+    """World body states from absolute coordinates q, q̇ of shape (..., n).
+
+    A leading sample axis converts a whole run at once; the result's arrays then have shape
+    (..., n_bodies, 3) and (..., n_bodies, 4).
+    """
+    lead = q.shape[:-1]
+    blocks_q = q.reshape(*lead, layout.n_bodies, layout.nc)
+    blocks_v = v.reshape(*lead, layout.n_bodies, layout.nc)
+    zeros = np.zeros(blocks_q.shape[:-1])
     if layout.planar:
-        position = np.column_stack([blocks_q[:, :2], np.zeros(nb)])
-        half = 0.5 * blocks_q[:, 2]
-        zeros = np.zeros(nb)
-        quaternion = np.column_stack([np.cos(half), zeros, zeros, np.sin(half)])
-        velocity = np.column_stack([blocks_v[:, :2], zeros])
-        omega = np.column_stack([zeros, zeros, blocks_v[:, 2]])
+        position = np.stack([blocks_q[..., 0], blocks_q[..., 1], zeros], axis=-1)
+        half = 0.5 * blocks_q[..., 2]
+        quaternion = np.stack([np.cos(half), zeros, zeros, np.sin(half)], axis=-1)
+        velocity = np.stack([blocks_v[..., 0], blocks_v[..., 1], zeros], axis=-1)
+        omega = np.stack([zeros, zeros, blocks_v[..., 2]], axis=-1)
         return BodyStates(position, quaternion, velocity, omega)
-    theta = blocks_q[:, 3:]
-    norm = np.linalg.norm(theta, axis=1, keepdims=True)
-    omega = 2.0 * np.einsum("bij,bj->bi", _e_matrix(theta / norm), blocks_v[:, 3:])
-    return BodyStates(blocks_q[:, :3].copy(), theta / norm, blocks_v[:, :3].copy(), omega)
+    theta = blocks_q[..., 3:]
+    theta = theta / np.linalg.norm(theta, axis=-1, keepdims=True)
+    omega = 2.0 * np.einsum("...ij,...j->...i", _e_matrix(theta), blocks_v[..., 3:])
+    return BodyStates(blocks_q[..., :3].copy(), theta, blocks_v[..., :3].copy(), omega)
 
 
 def coordinates(layout: Layout, states: BodyStates) -> tuple[np.ndarray, np.ndarray]:

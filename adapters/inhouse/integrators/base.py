@@ -196,9 +196,11 @@ class Integrator:
             self._fail(FAILED, t_target, f"{type(exc).__name__}: {exc}")
             return self.status
         limit = self.params["divergence_limit"]
-        if not (np.all(np.isfinite(q_new)) and np.all(np.isfinite(v_new))):
+        # One dot product per vector; NaN and inf propagate into their sum (not into max()).
+        squared_q, squared_v = float(q_new @ q_new), float(v_new @ v_new)
+        if not np.isfinite(squared_q + squared_v):
             self._fail(DIVERGED, t_new, "non-finite state")
-        elif max(np.linalg.norm(q_new), np.linalg.norm(v_new)) > limit:
+        elif max(squared_q, squared_v) > limit * limit:
             self._fail(DIVERGED, t_new, f"state norm exceeds divergence_limit={limit:g}")
         else:
             self.t, self.q, self.v = t_new, q_new, v_new

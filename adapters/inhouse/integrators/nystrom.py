@@ -77,14 +77,24 @@ def nystrom_step(acceleration, advance, t, q, v, h, tableau):
     q_new : ndarray, shape (m,)
     v_new : ndarray, shape (n,)
     """
-    accelerations = np.zeros((tableau.c.size, v.size))
+    stages = []
     for i, c_i in enumerate(tableau.c):
-        dq = h * (c_i * v + h * (tableau.abar[i, :i] @ accelerations[:i]))
-        v_stage = v + h * (tableau.a[i, :i] @ accelerations[:i])
-        accelerations[i] = acceleration(t + c_i * h, advance(q, dq), v_stage)
-    q_new = advance(q, h * (v + h * (tableau.bbar @ accelerations)))
-    v_new = v + h * (tableau.b @ accelerations)
-    return q_new, v_new
+        dq = (c_i * h) * v
+        v_stage = v
+        for j, k_j in enumerate(stages):  # strictly lower triangular: skip the zeros
+            if tableau.abar[i, j]:
+                dq = dq + (h * h * tableau.abar[i, j]) * k_j
+            if tableau.a[i, j]:
+                v_stage = v_stage + (h * tableau.a[i, j]) * k_j
+        stages.append(acceleration(t + c_i * h, advance(q, dq), v_stage))
+    dq = h * v
+    v_new = v
+    for j, k_j in enumerate(stages):
+        if tableau.bbar[j]:
+            dq = dq + (h * h * tableau.bbar[j]) * k_j
+        if tableau.b[j]:
+            v_new = v_new + (h * tableau.b[j]) * k_j
+    return advance(q, dq), v_new
 
 
 class NystromIntegrator(Integrator):
