@@ -111,7 +111,7 @@ def cmd_simulate(args) -> int:
     except ValueError as error:
         raise UserError(str(error)) from None
     times = sample_times(args.dt, t_end)
-    model, trajectory = _run_case(adapter, mech, args.method, args.dt, t_end, times)
+    trajectory = _run_case(adapter, mech, args.method, args.dt, t_end, times)
     reference = None
     if not args.no_reference:
         try:
@@ -137,8 +137,8 @@ def _run_case(adapter, mech, method, dt, t_end, times):
     try:
         model = adapter.build(mech)
     except UnsupportedCase as error:
-        return None, Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
-    return model, adapter.simulate(model, method, dt, t_end, times)
+        return Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
+    return adapter.simulate(model, method, dt, t_end, times)
 
 
 def cmd_export(args) -> int:
