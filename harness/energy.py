@@ -14,7 +14,7 @@ import numpy as np
 
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 from harness.outputs import body_frame, body_rotations, joint_angle, joint_slide
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates, Trajectory
 
 
 def kinetic_energy(mech: Mechanism, velocity, angular_velocity, rotations) -> np.ndarray:
@@ -98,10 +98,11 @@ def interval_work(mech: Mechanism, start: dict, end: dict, dt) -> np.ndarray:
     return work
 
 
-def state_arrays(trajectory: Trajectory) -> dict:
-    """The arrays :func:`interval_work` and the energy functions take, for a trajectory."""
-    return {"position": trajectory.position, "rotation": body_rotations(trajectory.quaternion),
-            "velocity": trajectory.velocity, "angular_velocity": trajectory.angular_velocity}
+def state_arrays(states: Trajectory | BodyStates) -> dict:
+    """The arrays :func:`interval_work` and the energy functions take, for a trajectory or for
+    the body states of one instant (both carry the same four arrays)."""
+    return {"position": states.position, "rotation": body_rotations(states.quaternion),
+            "velocity": states.velocity, "angular_velocity": states.angular_velocity}
 
 
 def mechanical_energy(mech: Mechanism, state: dict) -> np.ndarray:

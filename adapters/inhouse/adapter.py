@@ -109,16 +109,14 @@ def _ida_trajectory(mech: Mechanism, t_end: float, sample_times, params: dict) -
     from adapters.inhouse.constraints import layout_of
     from adapters.inhouse.dae import simulate_ida
     from adapters.inhouse.kinematics import assemble
-    from adapters.inhouse.states import body_states
+    from adapters.inhouse.states import trajectory_from_coordinates
 
     assembly = assemble(mech)
     began = time.perf_counter()
     result = simulate_ida(mech, assembly.q, assembly.v, t_end, sample_times, **params)
     wall = time.perf_counter() - began
-    layout = layout_of(mech)
-    states = [body_states(layout, q, v) for q, v in zip(result.q, result.v)]
     counters = {k: v for k, v in result.counters.items() if k != "steps" and v is not None}
-    return Trajectory.from_samples(
-        result.times, states, status=result.status, reason=result.reason or "",
-        failure_time=result.failure_time, wall_time_s=wall,
+    return trajectory_from_coordinates(
+        layout_of(mech), result.times, result.q, result.v, status=result.status,
+        reason=result.reason or "", failure_time=result.failure_time, wall_time_s=wall,
         steps=result.counters.get("steps", 0), counters=counters)

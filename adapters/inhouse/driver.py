@@ -15,7 +15,7 @@ import numpy as np
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.integrators import RUNNING, make_integrator
 from adapters.inhouse.kinematics import assemble
-from adapters.inhouse.states import body_states
+from adapters.inhouse.states import trajectory_from_coordinates
 from adapters.inhouse.stabilisation import Formulation
 from harness.model import Mechanism
 from harness.trajectory import Trajectory
@@ -86,15 +86,11 @@ class _Run:
         counters = {key: self.spent[key] + self.formulation.counters.get(key, 0)
                     for key in self.spent}
         counters["repartitions"] = getattr(self.formulation, "repartitions", 0)
-        run = dict(status=status, reason=integrator.failure_reason or "",
-                   failure_time=integrator.failure_time, wall_time_s=self.wall, steps=self.steps,
-                   counters=counters, notes=list(self.formulation.notes))
-        if not self.samples:
-            return Trajectory.empty(self.layout.n_bodies, **run)
-        states = body_states(self.layout, np.stack([q for q, _ in self.samples]),
-                             np.stack([v for _, v in self.samples]))
-        return Trajectory(np.asarray(self.times), states.position, states.quaternion,
-                          states.velocity, states.angular_velocity, **run)
+        return trajectory_from_coordinates(
+            self.layout, self.times, [q for q, _ in self.samples], [v for _, v in self.samples],
+            status=status, reason=integrator.failure_reason or "",
+            failure_time=integrator.failure_time, wall_time_s=self.wall, steps=self.steps,
+            counters=counters, notes=list(self.formulation.notes))
 
 
 def simulate(mech: Mechanism, formulation_class, integrator_name: str, integrator_params: dict,

@@ -33,9 +33,8 @@ from adapters.inhouse.integrators.base import SecondOrderSystem
 from adapters.inhouse.linalg import min_norm_correction
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.states import body_states
-from harness.energy import interval_work, mechanical_energy
+from harness.energy import interval_work, mechanical_energy, state_arrays
 from harness.model import Mechanism
-from harness.outputs import body_rotations
 
 
 class Formulation(SecondOrderSystem):
@@ -257,9 +256,7 @@ class GeometricElimination(_Projection):
         self._energy0 = 0.0
 
     def _state(self, q, v):
-        states = body_states(self._layout, q, v)
-        return {"position": states.position, "rotation": body_rotations(states.quaternion),
-                "velocity": states.velocity, "angular_velocity": states.angular_velocity}
+        return state_arrays(body_states(self._layout, q, v))
 
     def start(self, q, v):
         """Record E₀ = T + V at the initial state."""
