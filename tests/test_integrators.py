@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from adapters.inhouse.integrators import (
+from adapters.integrators import (
     DIVERGED,
     FAILED,
     RUNNING,

@@ -15,7 +15,7 @@ import numpy as np
 
 from adapters.base import Adapter, MethodSpec, parse_method
 from adapters.inhouse import driver
-from adapters.inhouse.integrators import integrator_class, integrator_names, integrator_params
+from adapters.integrators import integrator_class, integrator_names, integrator_params
 from adapters.inhouse.newton_euler import NewtonEuler
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import STRATEGIES

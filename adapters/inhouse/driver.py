@@ -13,7 +13,7 @@ import time
 import numpy as np
 
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.integrators import RUNNING, make_integrator
+from adapters.integrators import RUNNING, make_integrator
 from adapters.inhouse.kinematics import assemble
 from adapters.inhouse.states import trajectory_from_coordinates
 from adapters.inhouse.stabilisation import Formulation
@@ -101,7 +101,7 @@ def simulate(mech: Mechanism, formulation_class, integrator_name: str, integrato
     ----------
     formulation_class : type[Formulation]
     integrator_name : str
-        A name from :func:`adapters.inhouse.integrators.integrator_names`.
+        A name from :func:`adapters.integrators.integrator_names`.
     dt : float
         Fixed step, or first-step hint of an adaptive method, s.
     t_end : float

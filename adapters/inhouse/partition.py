@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.inhouse.integrators.base import StepFailure
+from adapters.integrators.base import StepFailure
 from adapters.inhouse.linalg import solve, solve_matrix
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.stabilisation import Formulation

@@ -1,6 +1,6 @@
 """Formulations and constraint stabilisations as interchangeable strategies (seed 002 ch. 3 and 5).
 
-Each strategy is a second-order problem for :mod:`adapters.inhouse.integrators`: it provides
+Each strategy is a second-order problem for :mod:`adapters.integrators`: it provides
 ``acceleration(t, q, v)`` (an index-1 form of the equations of motion) and ``project(t, q, v)``
 (a post-step correction, the identity unless the method corrects the state).
 
@@ -29,7 +29,7 @@ import scipy.linalg
 
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, index1_acceleration
-from adapters.inhouse.integrators.base import SecondOrderSystem
+from adapters.integrators.base import SecondOrderSystem
 from adapters.inhouse.linalg import min_norm_correction
 from adapters.inhouse.rank import full_pivot_elimination
 from adapters.inhouse.states import body_states

@@ -2,7 +2,7 @@
 :mod:`.dynamics`.
 
 Pinocchio computes constrained accelerations but has no time integrator; the harness's own
-integrators (:mod:`adapters.inhouse.integrators`) drive it, the configuration integrated on its
+integrators (:mod:`adapters.integrators`) drive it, the configuration integrated on its
 manifold by ``pin.integrate``.  A method is an integrator × constraint-solver settings (Baumgarte
 gains, proximal ``mu``, ``max_iter``, ``accuracy``) × projection on/off; every method takes every
 parameter, only the defaults differ.
@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 
 from adapters.base import Adapter, MethodSpec
-from adapters.inhouse.integrators import RUNNING, integrator_names, make_integrator
+from adapters.integrators import RUNNING, integrator_names, make_integrator
 from adapters.pinocchio_adapter.build import PinocchioModel, build_model
 from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
 from adapters.pinocchio_adapter.state import body_states, joint_state

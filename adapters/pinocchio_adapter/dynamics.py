@@ -1,6 +1,6 @@
 """The equations of motion of a :class:`PinocchioModel` as a second-order problem.
 
-:class:`ConstrainedProblem` implements the protocol of :mod:`adapters.inhouse.integrators`:
+:class:`ConstrainedProblem` implements the protocol of :mod:`adapters.integrators`:
 ``acceleration`` calls ``pin.constraintDynamics`` (tree dynamics with the loop closures, solved by
 Pinocchio's proximal method with its Baumgarte corrector), ``advance`` is ``pin.integrate`` (the
 configuration stays on its manifold), and ``project`` optionally pulls the state back onto the
@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from adapters.inhouse.integrators.base import StepFailure
+from adapters.integrators.base import StepFailure
 from adapters.pinocchio_adapter.build import PinocchioModel
 from harness.model import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
 

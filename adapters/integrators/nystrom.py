@@ -22,7 +22,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from adapters.inhouse.integrators.base import Integrator
+from adapters.integrators.base import Integrator
 
 
 @dataclass(frozen=True)

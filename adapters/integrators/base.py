@@ -121,7 +121,7 @@ class Integrator:
         evaluations, LU factorisations, Newton iterations, completed steps.
     """
 
-    #: User-facing name (key of the registry in :mod:`adapters.inhouse.integrators`).
+    #: User-facing name (key of the registry in :mod:`adapters.integrators`).
     name: str = ""
     #: Order of accuracy (for adaptive methods: of the propagated solution).
     order: int = 0

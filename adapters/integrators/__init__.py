@@ -25,7 +25,7 @@ lsoda
 
 from __future__ import annotations
 
-from adapters.inhouse.integrators.base import (
+from adapters.integrators.base import (
     DIVERGED,
     FAILED,
     RUNNING,
@@ -33,14 +33,14 @@ from adapters.inhouse.integrators.base import (
     SecondOrderProblem,
     SecondOrderSystem,
 )
-from adapters.inhouse.integrators.multistep import (
+from adapters.integrators.multistep import (
     ABM4,
     ADAMS_BASHFORTH_METHODS,
     ADAMS_MOULTON_METHODS,
     GEAR_METHODS,
 )
-from adapters.inhouse.integrators.nystrom import RK4, RKN4, Euler, Heun, SymplecticEuler
-from adapters.inhouse.integrators.scipy_solvers import SCIPY_METHODS
+from adapters.integrators.nystrom import RK4, RKN4, Euler, Heun, SymplecticEuler
+from adapters.integrators.scipy_solvers import SCIPY_METHODS
 
 __all__ = [
     "DIVERGED", "FAILED", "RUNNING", "INTEGRATORS", "Integrator", "SecondOrderProblem",

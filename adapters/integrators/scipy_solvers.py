@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK45, Radau
 
-from adapters.inhouse.integrators.base import Integrator, StepFailure
+from adapters.integrators.base import Integrator, StepFailure
 
 
 class ScipyIntegrator(Integrator):
@@ -36,7 +36,7 @@ class ScipyIntegrator(Integrator):
     Parameters
     ----------
     problem, t0, q0, v0, dt
-        As :class:`~adapters.inhouse.integrators.base.Integrator`; ``dt`` is the first step.
+        As :class:`~adapters.integrators.base.Integrator`; ``dt`` is the first step.
     rtol, atol : float
         Relative and absolute tolerances of the local error (defaults 1e-6, 1e-9).
     max_step : float

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
-from adapters.inhouse.integrators.base import StepFailure
+from adapters.integrators.base import StepFailure
 
 #: An iteration whose correction shrinks by less than this factor is "slow": the Jacobian is
 #: refreshed (if it was not computed in this step already) and the step restarted.
