@@ -146,22 +146,51 @@ Force = BodyForce | BodyTorque | JointActuation | SpringDamper
 
 
 @dataclass(frozen=True)
+class PrescribedJointRate:
+    """A joint coordinate rate prescribed at t = 0 besides the driver's (rad/s or m/s)."""
+
+    joint: str
+    rate: float
+
+
+@dataclass(frozen=True)
+class PrescribedPointVelocity:
+    """World velocity (m/s) of a body point prescribed at t = 0.
+
+    ``point`` is in the body frame (m); only the world ``components`` (0, 1, 2 = x, y, z) of
+    ``velocity`` are prescribed, the others are left to the constraints.
+    """
+
+    body: str
+    point: np.ndarray
+    velocity: np.ndarray
+    components: tuple[int, ...] = (0, 1, 2)
+
+
+Prescribed = PrescribedJointRate | PrescribedPointVelocity
+
+
+@dataclass(frozen=True)
 class InitialState:
     """The initial driver state.
 
     ``value`` is the driver joint's coordinate (rad or m) measured from the reference
     configuration; ``rate`` its time derivative.  ``guess`` maps body names to approximate centre
     positions (m, world) that replace the reference positions as the Newton start and so pick the
-    assembly branch (seed 000 §1.1.2, lesson on several solutions).
+    assembly branch (seed 000 §1.1.2, lesson on several solutions).  ``prescribed`` holds further
+    velocity conditions at t = 0; together with ``rate`` they must be consistent with the
+    constraints (the assembly checks it and refuses an inconsistent start).
     """
 
     driver: str
     value: float
     rate: float
     guess: dict[str, np.ndarray] = field(default_factory=dict)
+    prescribed: tuple[Prescribed, ...] = ()
 
 
-OutputKind = Literal["joint_angle", "joint_rate", "joint_position", "position", "velocity"]
+OutputKind = Literal["joint_angle", "joint_rate", "joint_position", "position", "velocity",
+                     "point_position", "point_velocity"]
 
 
 @dataclass(frozen=True)
@@ -172,12 +201,14 @@ class Output:
     right-hand rule, unwrapped (rad).  ``joint_rate``: its derivative (rad/s).
     ``joint_position``: slide along the joint axis since t = 0 (m).  ``position``/``velocity``:
     component ``component`` (0, 1, 2 = x, y, z) of a body's centre of mass (m, m/s).
+    ``point_position``/``point_velocity``: the same for the body point ``point`` (body frame, m).
     """
 
     name: str
     kind: str
     target: str
     component: int = 0
+    point: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
