@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+from scipy.spatial.distance import pdist
 
 GROUND = "ground"
 
@@ -258,3 +259,23 @@ class Mechanism:
     def masses(self) -> np.ndarray:
         """Body masses, shape (n_bodies,), kg."""
         return np.array([body.mass for body in self.bodies])
+
+
+def characteristic_length(mech: Mechanism) -> float:
+    """The mechanism's size, m: the largest distance between any two of its joint points and
+    centres of mass in the reference configuration (ground points included).
+
+    A single body hinged at its centre has no such distance; its largest radius of gyration
+    √(tr J / m) stands in.
+    """
+    points = [body.position for body in mech.bodies]
+    for joint in mech.joints:
+        for body, point in ((joint.body1, joint.point1), (joint.body2, joint.point2)):
+            if body == GROUND:
+                points.append(np.asarray(point, dtype=float))
+            else:
+                frame = mech.bodies[mech.body_index(body)]
+                points.append(frame.position + frame.rotation @ point)
+    spread = float(pdist(np.array(points)).max()) if len(points) > 1 else 0.0
+    gyration = max(float(np.sqrt(np.trace(b.inertia) / b.mass)) for b in mech.bodies)
+    return spread if spread > 0 else gyration

@@ -18,18 +18,23 @@ it ~6e-10 from route A on the four-bar and ~1e-7 on the fast-spinning slider-cra
 reported, not required.  Rejected as routes (measured on the 8 s spatial slider-crank, crank turning
 42 rad): adaptive DOP853 on the partitioned form at rtol 3e-14 (1.7e-9 off) and fixed-step
 partitioning with its split switched late (RK4 or RKN4 at 5e-5: 8e-8 and 6e-9 off; the reduced
-ODE steepens near a fold of the independent coordinate, see :mod:`adapters.inhouse.partition`,
+ODE steepens near a fold of the independent coordinate, see the in-house ``partition`` method,
 whose default now switches at a 1 % conditioning advantage).
 
 Shipped references live in ``scenarios/references`` (``MBH_CACHE_DIR`` overrides it); a file is
 keyed by the scenario's content hash and :data:`REFERENCE_VERSION`, so editing a scenario, or
-bumping the version when the formulation changes, rebuilds it.
+bumping the version when the formulation changes, rebuilds it.  On load the stored metadata must
+match the scenario and the builder (name, content hash, version, grid step, routes, agreement
+within the limit, arrays on the grid), or the reference is rebuilt; files are written atomically
+(unique temporary file, ``os.replace``), so processes of a pool can share the cache.
 """
 
 from __future__ import annotations
 
 import json
 import os
+import tempfile
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +58,8 @@ class ReferenceError(RuntimeError):
 
 
 def cache_dir() -> Path:
+    """Directory of the cached references: ``MBH_CACHE_DIR`` or the shipped
+    ``scenarios/references``."""
     default = Path(__file__).resolve().parent.parent / "scenarios" / "references"
     return Path(os.environ.get("MBH_CACHE_DIR", default))
 
@@ -62,12 +69,18 @@ def reference_grid(mech: Mechanism) -> np.ndarray:
     return np.arange(int(round(mech.duration / GRID_STEP)) + 1) * GRID_STEP
 
 
+def _refusal_path(mech: Mechanism) -> Path:
+    """Where a refused build of ``mech`` is recorded (see :func:`load_or_build`)."""
+    return _paths(mech)[1].with_suffix(".refused.json")
+
+
 def _paths(mech: Mechanism) -> tuple[Path, Path]:
+    """The data (.npz) and metadata (.json) files of ``mech``'s reference."""
     stem = f"{mech.name}-{mech.content_hash[:16]}-v{REFERENCE_VERSION}"
     return cache_dir() / f"{stem}.npz", cache_dir() / f"{stem}.json"
 
 
-_POSITION_LEVEL = ("joint_angle", "joint_position", "position")
+_POSITION_LEVEL = ("joint_angle", "joint_position", "position", "point_position")
 
 
 def route_difference(mech: Mechanism, a: Trajectory, b: Trajectory) -> dict:
@@ -120,14 +133,14 @@ def build_reference(mech: Mechanism) -> tuple[Trajectory, dict]:
     route_a = _run_route(mech, ROUTE_A, grid)
     route_b = _run_route(mech, ROUTE_B, grid)
     agreement = route_difference(mech, route_a, route_b)
+    if agreement["max"] > AGREEMENT_LIMIT:
+        raise ReferenceError(f"{mech.name}: reference routes disagree by {agreement['max']:.3g} "
+                             f"> {AGREEMENT_LIMIT:g} ({json.dumps(agreement)})")
     info = {"scenario": mech.name, "content_hash": mech.content_hash,
             "version": REFERENCE_VERSION, "route_a": list(ROUTE_A), "route_b": list(ROUTE_B),
             "grid_step": GRID_STEP, "agreement": agreement,
             "route_a_cost": _cost(route_a), "route_b_cost": _cost(route_b),
             "dae_check": _dae_check(mech, route_a, grid)}
-    if agreement["max"] > AGREEMENT_LIMIT:
-        raise ReferenceError(f"{mech.name}: reference routes disagree by {agreement['max']:.3g} "
-                             f"> {AGREEMENT_LIMIT:g} ({json.dumps(agreement)})")
     return route_a, info
 
 
@@ -142,15 +155,122 @@ def reference_info(mech: Mechanism) -> dict:
 
 
 def load_or_build(mech: Mechanism) -> tuple[Trajectory, dict]:
+    """``mech``'s reference and its metadata, from the cache when the stored files pass
+    :func:`_stale_reason`, otherwise built and cached.
+
+    Safe for concurrent processes: each file is written to a unique temporary file in the cache
+    directory and moved into place with ``os.replace`` (atomic), data first and metadata last, so
+    a reader sees either no metadata or metadata whose data is complete.  Processes that build the
+    same reference at once write identical content; the last replace wins.  A refused build is
+    recorded next to it (``<stem>.refused.json``: the reason, keyed like a reference), so later
+    callers get the same ReferenceError at once; delete the record to try again.
+
+    Raises
+    ------
+    ReferenceError
+        When the routes fail or disagree (:func:`build_reference`), or the cache cannot be
+        written.
+    """
     data_path, info_path = _paths(mech)
-    if data_path.exists() and info_path.exists():
+    cached = _read_cache(mech, data_path, info_path)
+    if cached is not None:
+        return cached
+    _raise_recorded_refusal(mech)
+    try:
+        trajectory, info = build_reference(mech)
+    except ReferenceError as error:
+        _record_refusal(mech, error)
+        raise
+    try:
+        data_path.parent.mkdir(parents=True, exist_ok=True)
+        _replace_atomically(data_path, lambda handle: np.savez_compressed(
+            handle, **{key: getattr(trajectory, key) for key in _ARRAYS}))
+        _replace_atomically(info_path, lambda handle: handle.write(
+            json.dumps(info, indent=2).encode()))
+    except OSError as error:
+        raise ReferenceError(f"{mech.name}: cannot write the reference cache in "
+                             f"{data_path.parent}: {error}") from error
+    return trajectory, info
+
+
+def _refusal_key(mech: Mechanism) -> dict:
+    """What a recorded refusal must match to stand for today's builder and scenario."""
+    return {"scenario": mech.name, "content_hash": mech.content_hash,
+            "version": REFERENCE_VERSION, "grid_step": GRID_STEP, "route_a": list(ROUTE_A),
+            "route_b": list(ROUTE_B), "agreement_limit": AGREEMENT_LIMIT}
+
+
+def _record_refusal(mech: Mechanism, error: ReferenceError) -> None:
+    """Keep why the build was refused, so that the next caller learns it at once instead of
+    spending minutes on the same routes (failure is data; delete the file to try again)."""
+    record = {**_refusal_key(mech), "refused": str(error)}
+    try:
+        _replace_atomically(_refusal_path(mech), lambda handle: handle.write(
+            json.dumps(record, indent=2).encode()))
+    except OSError:
+        pass  # an unwritable cache only costs the next caller a rebuild
+
+
+def _raise_recorded_refusal(mech: Mechanism) -> None:
+    """Raise the recorded ReferenceError of a refused build that still applies, if any."""
+    try:
+        record = json.loads(_refusal_path(mech).read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(record, dict) and all(record.get(k) == v for k, v in _refusal_key(mech).items()):
+        raise ReferenceError(f"{record.get('refused')} (recorded by an earlier build in "
+                             f"{_refusal_path(mech).name}; delete it to build again)")
+
+
+def _replace_atomically(path: Path, write) -> None:
+    """Call ``write(binary file)`` on a unique temporary file next to ``path``, then move it onto
+    ``path`` with ``os.replace``; the temporary file is removed if anything fails."""
+    handle = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.",
+                                         suffix=".tmp", delete=False)
+    try:
+        with handle:
+            write(handle)
+        os.chmod(handle.name, 0o644)  # readable by all, as a plainly written file (not 0600)
+        os.replace(handle.name, path)
+    except BaseException:
+        Path(handle.name).unlink(missing_ok=True)
+        raise
+
+
+def _read_cache(mech: Mechanism, data_path: Path, info_path: Path):
+    """The cached (trajectory, info), or None when a file is missing, unreadable or stale."""
+    try:
+        info = json.loads(info_path.read_text())
         with np.load(data_path) as data:
             trajectory = Trajectory(**{key: data[key] for key in _ARRAYS})
-        return trajectory, json.loads(info_path.read_text())
-    trajectory, info = build_reference(mech)
-    data_path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = data_path.with_suffix(".tmp.npz")
-    np.savez_compressed(temporary, **{key: getattr(trajectory, key) for key in _ARRAYS})
-    temporary.replace(data_path)
-    info_path.write_text(json.dumps(info, indent=2))
-    return trajectory, info
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
+        return None
+    return None if _stale_reason(mech, info, trajectory) else (trajectory, info)
+
+
+def _stale_reason(mech: Mechanism, info: dict, trajectory: Trajectory) -> str:
+    """Why a cached reference does not belong to ``mech`` as built today ('' when it does):
+    scenario name, content hash, version, grid step, routes, agreement within
+    :data:`AGREEMENT_LIMIT`, and arrays on :func:`reference_grid`."""
+    expected = {"scenario": mech.name, "content_hash": mech.content_hash,
+                "version": REFERENCE_VERSION, "grid_step": GRID_STEP}
+    for key, value in expected.items():
+        if info.get(key) != value:
+            return f"{key} is {info.get(key)!r}, expected {value!r}"
+    routes = [info.get("route_a"), info.get("route_b")]
+    if routes != [list(ROUTE_A), list(ROUTE_B)]:
+        return f"routes {routes!r} are not {[list(ROUTE_A), list(ROUTE_B)]!r}"
+    agreement = info.get("agreement", {}).get("max")
+    if not isinstance(agreement, (int, float)) or not agreement <= AGREEMENT_LIMIT:
+        return f"route agreement {agreement!r} is not within {AGREEMENT_LIMIT:g}"
+    grid = reference_grid(mech)
+    n_bodies = len(mech.bodies)
+    shapes = {"times": (grid.size,), "position": (grid.size, n_bodies, 3),
+              "quaternion": (grid.size, n_bodies, 4), "velocity": (grid.size, n_bodies, 3),
+              "angular_velocity": (grid.size, n_bodies, 3)}
+    for key, shape in shapes.items():
+        if getattr(trajectory, key).shape != shape:
+            return f"{key} has shape {getattr(trajectory, key).shape}, expected {shape}"
+    if np.abs(trajectory.times - grid).max() > 1e-9:
+        return "sample times are not the reference grid"
+    return ""

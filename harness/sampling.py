@@ -1,27 +1,75 @@
-"""Sample grids shared by every run, so that each sample lands on the reference grid."""
+"""The evaluation grid: the sample times every case of a scenario is measured on.
+
+Every error figure (outputs against the reference, constraint violations, energy balance) is
+taken on one grid per scenario, whatever step a case uses, so maxima for different dt compare
+like with like.  The grid is every :data:`EVALUATION_STEP` from 0 to the end time: 10 ms, the
+seed's own step (Rouvinen's Δt = 0.01 s, SEEDS.md) and a multiple of the reference grid step
+(1 ms), so every sample lands on a reference sample.  Sampling every 10 ms resolves the shipped
+motions (fastest body 69 rad/s: 0.69 rad per sample, below the π that unwrapping angles needs).
+
+A case's step dt must divide the evaluation step: an integer number of steps per sample, to a
+relative 1e-9.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
 from harness.reference import GRID_STEP
+from harness.trajectory import Trajectory
+
+#: Spacing of the evaluation grid, s (a multiple of the reference grid step).
+EVALUATION_STEP = 0.01
+#: Relative tolerance on "integer number of steps per sample".
+STEP_MATCH = 1e-9
 
 
-def sample_interval(dt: float) -> float:
-    """The smallest multiple of ``dt`` (s) that is also a multiple of the reference grid step.
+def steps_per_sample(dt: float) -> int:
+    """Number of steps of size ``dt`` (s) between two evaluation samples.
 
-    Raises ValueError when none exists below 1000 steps (a step incommensurate with the grid).
+    Raises
+    ------
+    ValueError
+        When ``dt`` does not divide :data:`EVALUATION_STEP`; the message names dt, the grid step
+        and the valid choices.
     """
-    for k in range(1, 1001):
-        ratio = k * dt / GRID_STEP
-        if ratio >= 1 - 1e-9 and abs(ratio - round(ratio)) < 1e-6:
-            return k * dt
-    raise ValueError(f"step {dt:g} s is incommensurate with the reference grid ({GRID_STEP:g} s)")
+    ratio = EVALUATION_STEP / dt if dt > 0 else 0.0
+    count = round(ratio) if np.isfinite(ratio) else 0  # a subnormal dt overflows the ratio
+    if count < 1 or abs(ratio - count) > STEP_MATCH * ratio:
+        choices = ", ".join(f"{EVALUATION_STEP / k:g}" for k in (1, 2, 4, 5, 10, 20, 100))
+        raise ValueError(f"step dt = {dt:g} s does not divide the evaluation grid step "
+                         f"{EVALUATION_STEP:g} s: dt must be {EVALUATION_STEP:g} s / k for an "
+                         f"integer k ≥ 1 (e.g. {choices} s)")
+    return count
 
 
 def sample_times(dt: float, t_end: float) -> np.ndarray:
-    """Sample times from 0 to t_end (s), every :func:`sample_interval` (dt), shape (k,)."""
-    interval = sample_interval(dt)
-    count = int(np.floor(t_end / interval + 1e-9))
-    grid_steps = round(interval / GRID_STEP)
-    return np.arange(count + 1) * grid_steps * GRID_STEP
+    """Evaluation sample times from 0 to t_end (s), every :data:`EVALUATION_STEP`, shape (k,).
+
+    ``dt`` (s) is checked by :func:`steps_per_sample`; the last sample is the last grid time not
+    after ``t_end``.  The times are multiples of the reference grid step, rounded to it.
+    """
+    steps_per_sample(dt)
+    count = int(np.floor(t_end / EVALUATION_STEP + 1e-9))
+    return np.arange(count + 1) * round(EVALUATION_STEP / GRID_STEP) * GRID_STEP
+
+
+#: Sample times within this of a reference grid point match it, s.
+TIME_MATCH = 1e-9
+
+
+def reference_indices(reference: Trajectory, times: np.ndarray) -> np.ndarray:
+    """Indices of ``times`` (s, shape (k,)) in the reference grid, shape (k,).
+
+    Raises
+    ------
+    ValueError
+        When a time is not on the reference grid (within :data:`TIME_MATCH`).
+    """
+    index = np.clip(np.searchsorted(reference.times, times - TIME_MATCH), 0,
+                    reference.n_samples - 1)
+    off = np.abs(reference.times[index] - times) > TIME_MATCH
+    if np.any(off):
+        raise ValueError(f"sample time {times[off][0]:.9g} s is not on the reference grid "
+                         f"(step {reference.times[1] - reference.times[0]:g} s)")
+    return index

@@ -10,8 +10,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from adapters.inhouse.constraints import ConstraintSystem, reference_coordinates
+from adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
 from adapters.inhouse.rank import RankReport, rank_analysis
+from adapters.inhouse.states import coordinates
 from harness.model import Mechanism
 
 #: Assembly stops when max |Φ| falls below this (m, rad, or dimensionless).
@@ -98,6 +99,40 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
             "there: check link lengths and the driver value; seed 000 example 1.9)")
     jacobian = system.jacobian(q)
     v = _solve(jacobian, -system.phi_t(q))
+    a = _solve(jacobian, system.gamma(q, v))
+    return Assembly(q, v, a, residual, iterations)
+
+
+def common_start(mech: Mechanism) -> Assembly:
+    """The harness's common start (DESIGN.md rule 3) in absolute coordinates.
+
+    Every engine starts from :func:`harness.initial.initial_state`; this converts it to (q, q̇)
+    (planar angles taken on the branch of :func:`reference_coordinates`, so that the prismatic
+    angle rows see no 2π) and polishes it onto the in-house joint equations: Newton–Raphson on Φ
+    without the driver (usually no iteration: the start already satisfies the neutral equations
+    to ~1e-15) and the minimum-norm velocity correction Φ_q⁺ Φ_q q̇ (002 eq. 137).  The driver
+    value and rate are the harness's; nothing here re-assembles from the driver.
+
+    Raises
+    ------
+    AssemblyError
+        When the polish does not converge (the two formulations' joint equations disagree).
+    """
+    from harness.initial import initial_state
+
+    layout = layout_of(mech)
+    q, v = coordinates(layout, initial_state(mech))
+    if layout.planar:
+        reference = reference_coordinates(mech)[2::3]
+        q[2::3] = reference + (q[2::3] - reference + np.pi) % (2.0 * np.pi) - np.pi
+    system = ConstraintSystem(mech)
+    q, residual, iterations, converged = newton_raphson(system, q)
+    if not converged:
+        raise AssemblyError(f"{mech.source or mech.name}: the common start does not satisfy the "
+                            f"in-house joint equations (max |Φ| = {residual:.3g} after "
+                            f"{iterations} Newton–Raphson iterations)")
+    jacobian = system.jacobian(q)
+    v = v - _solve(jacobian, jacobian @ v)
     a = _solve(jacobian, system.gamma(q, v))
     return Assembly(q, v, a, residual, iterations)
 
