@@ -4,21 +4,273 @@
 :class:`~harness.trajectory.Trajectory`; ``methods()`` lists the engine's methods with their
 parameters; ``version()`` names the engine version.  Method names are user-facing strings
 ``NAME[:key=value,...]`` parsed by :func:`parse_method`.
+
+One run loop
+------------
+:meth:`Adapter.simulate` is a template shared by every adapter.  It resolves the method, checks
+the times with one rule (:func:`check_run_times`), asks the adapter for an engine-specific
+:class:`Stepper` (``Adapter._start``), steps it through every sample time and on to ``t_end``,
+checks every state it reads (:func:`divergence_reason`) and turns every way a run can end into a
+status (the classification is in :mod:`harness.trajectory`):
+
+* ``ok``: every state read was finite and within :data:`DIVERGENCE_LIMIT`;
+* ``diverged``: a state read was non-finite or beyond the limit, or the engine's own divergence
+  check fired (:class:`RunFailure` with status ``diverged``);
+* ``failed``: the method stopped — a solver failure reported through :class:`RunFailure`, or any
+  exception raised by the adapter or the engine during the run (reason
+  ``"<ExceptionType>: message"``);
+* ``unsupported``: ``_start`` raised :class:`UnsupportedCase`.
+
+``failure_time`` is the time of the last good state: the last state the method produced that
+passed the checks (the stepper's own per-step checks where it has them, :attr:`Stepper.t_good`,
+else the last state this loop read and checked).  Every sample before it is kept.  A failure
+before the engine holds its start state gives no samples and ``failure_time`` 0.0.  Wall time is
+measured around the stepping only (``Stepper._step_to``), not around reading states.
 """
 
 from __future__ import annotations
 
 import abc
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from harness.model import Mechanism
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates, Trajectory
+
+#: A body whose position (m), velocity (m/s) or angular velocity (rad/s) exceeds this in norm has
+#: diverged (the same limit as the integrators' default ``divergence_limit``).
+DIVERGENCE_LIMIT = 1e8
+#: Relative tolerance of "an integer multiple of dt" (t_end, and sample times of fixed-step
+#: methods): |t − k·dt| ≤ GRID_RTOL · max(t, dt).
+GRID_RTOL = 1e-9
 
 
 class UnsupportedCase(Exception):
-    """Raised by ``build`` when the engine cannot represent the mechanism; the message says why."""
+    """Raised by ``build`` (or ``_start``) when the engine cannot represent the mechanism or the
+    method; the message says why."""
+
+
+class RunFailure(Exception):
+    """Raised by a :class:`Stepper` when the engine stopped the run.
+
+    Parameters
+    ----------
+    status : {"failed", "diverged"}
+    reason : str
+        What happened, for the trajectory's ``reason``.
+    """
+
+    def __init__(self, status: str, reason: str):
+        if status not in ("failed", "diverged"):
+            raise ValueError(f"RunFailure status must be 'failed' or 'diverged', got {status!r}")
+        super().__init__(reason)
+        self.status = status
+        self.reason = reason
+
+
+def describe(error: BaseException) -> str:
+    """``"<ExceptionType>: message"`` on one line (the reason of a run ended by an exception)."""
+    return f"{type(error).__name__}: {' '.join(str(error).split())}"
+
+
+def _bad(name: str, value, rule: str) -> ValueError:
+    return ValueError(f"invalid {name} = {value!r}: {rule}")
+
+
+def check_run_times(dt, t_end, sample_times, fixed_step: bool = True) -> np.ndarray:
+    """Check the times of a run with the one rule every adapter shares.
+
+    Rule: ``dt`` and ``t_end`` finite and > 0; ``t_end`` an integer multiple of ``dt`` within the
+    relative :data:`GRID_RTOL`; ``sample_times`` a 1-D array of finite, strictly increasing times
+    in [0, t_end] (t_end itself within GRID_RTOL), on the step grid (integer multiples of ``dt``
+    within GRID_RTOL) when the method takes fixed steps.
+
+    Parameters
+    ----------
+    dt : float
+        Step size (first-step hint of an adaptive method), s.
+    t_end : float
+        End time, s.
+    sample_times : array_like, shape (k,)
+        s.
+    fixed_step : bool
+        Whether the method takes steps of exactly ``dt``.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        ``sample_times`` as floats.
+
+    Raises
+    ------
+    ValueError
+        ``"invalid <argument> = <value>: <rule>"`` for the first argument that breaks the rule;
+        for sample times the argument is ``sample_times[<index>]`` of the first bad one (or
+        ``sample_times.shape``).
+    """
+    for name, value in (("dt", dt), ("t_end", t_end)):
+        if not (isinstance(value, (int, float, np.floating, np.integer)) and np.isfinite(value)
+                and value > 0):
+            raise _bad(name, value, "must be a finite number > 0")
+    dt, t_end = float(dt), float(t_end)
+    if not _on_grid(np.array([t_end]), dt).all() or round(t_end / dt) < 1:
+        raise _bad("t_end", t_end, f"must be an integer multiple of dt = {dt!r} "
+                                   f"(relative tolerance {GRID_RTOL:g})")
+    times = np.asarray(sample_times, dtype=float)
+    if times.ndim != 1:
+        raise _bad("sample_times.shape", times.shape, "must be 1-D")
+    rules = (
+        (~np.isfinite(times), "must be finite"),
+        (np.append(False, np.diff(times) <= 0), "must be strictly increasing"),
+        ((times < 0) | (times > t_end * (1 + GRID_RTOL)), f"must lie in [0, t_end = {t_end!r}]"),
+        (~_on_grid(times, dt) if fixed_step else np.zeros(times.shape, bool),
+         f"must be integer multiples of dt = {dt!r} for a fixed-step method "
+         f"(relative tolerance {GRID_RTOL:g})"),
+    )
+    for broken, rule in rules:
+        if broken.any():
+            index = int(np.argmax(broken))
+            raise _bad(f"sample_times[{index}]", float(times[index]), rule)
+    return times
+
+
+def _on_grid(times: np.ndarray, dt: float) -> np.ndarray:
+    """Whether each time is an integer multiple of ``dt`` within :data:`GRID_RTOL`."""
+    return np.abs(times - np.rint(times / dt) * dt) <= GRID_RTOL * np.maximum(times, dt)
+
+
+def divergence_reason(states: BodyStates, limit: float = DIVERGENCE_LIMIT) -> str | None:
+    """Why ``states`` count as diverged, or None: a non-finite position, quaternion, velocity or
+    angular velocity, or a position, velocity or angular-velocity norm above ``limit``."""
+    fields = {"position": "m", "quaternion": "", "velocity": "m/s", "angular_velocity": "rad/s"}
+    for name in fields:
+        if not np.all(np.isfinite(getattr(states, name))):
+            return f"non-finite {name.replace('_', ' ')}"
+    for name, unit in fields.items():
+        if unit:
+            largest = float(np.max(np.linalg.norm(getattr(states, name), axis=-1), initial=0.0))
+            if largest > limit:
+                return f"{name.replace('_', ' ')} {largest:.3g} {unit} exceeds {limit:g}"
+    return None
+
+
+@dataclass(frozen=True)
+class RunGrid:
+    """The checked times of one run.
+
+    Attributes
+    ----------
+    dt : float
+        Step (first-step hint of an adaptive method), s.
+    t_end : float
+        s.
+    sample_times : ndarray, shape (k,)
+        s.
+    fixed_step : bool
+    """
+
+    dt: float
+    t_end: float
+    sample_times: np.ndarray
+    fixed_step: bool
+
+    def steps(self, t: float) -> int:
+        """Number of fixed steps from 0 to ``t``: round(t / dt)."""
+        return int(round(t / self.dt))
+
+
+class Stepper(abc.ABC):
+    """Engine-specific stepping of one run, driven by :meth:`Adapter.simulate`.
+
+    Modelled on ``scipy.integrate.OdeSolver``: the adapter's template owns the times, the checks,
+    the samples and the status; a stepper only advances its engine (:meth:`_step_to`) and reads
+    body states (:meth:`_states`).
+
+    Attributes
+    ----------
+    steps : int
+        Engine steps taken so far.
+    t_good : float or None
+        Time of the last state the engine produced and its own per-step checks passed, s, when
+        the stepper tracks it (None: only the states the loop reads are known good).
+    notes : list of str
+        Facts a reader of the case must know.
+    """
+
+    def __init__(self):
+        self.steps = 0
+        self.t_good: float | None = None
+        self.notes: list[str] = []
+
+    @abc.abstractmethod
+    def _step_to(self, t: float) -> None:
+        """Advance the engine to time ``t`` (s, never earlier than the last call).
+
+        Raises :class:`RunFailure` when the engine stops or detects divergence; any other
+        exception ends the run as ``failed``.
+        """
+
+    @abc.abstractmethod
+    def _states(self, t: float) -> BodyStates:
+        """Body states at ``t`` (s), the time of the last :meth:`_step_to` call or, for adaptive
+        methods, a time inside the last step."""
+
+    def counters(self) -> dict:
+        """Cost counters of the run so far (``rhs_evals``, ``jacobian_evals`` …)."""
+        return {}
+
+    def divergence(self, states: BodyStates) -> str | None:
+        """An engine-specific divergence check on top of :func:`divergence_reason` (None: fine)."""
+        return None
+
+    def close(self) -> None:
+        """Release engine resources (called once, after the run)."""
+
+    def run(self, grid: RunGrid, n_bodies: int) -> Trajectory:
+        """Step through every sample time and on to ``grid.t_end``; every way the run ends
+        becomes a status (see the module notes)."""
+        times, states = [], []
+        last_good, wall = 0.0, 0.0
+        status, reason, failure_time = "ok", "", None
+        targets = list(grid.sample_times)
+        if not targets or targets[-1] < grid.t_end * (1 - GRID_RTOL):
+            targets.append(grid.t_end)
+        try:
+            for index, t in enumerate(targets):
+                began = time.perf_counter()
+                try:
+                    self._step_to(float(t))
+                finally:
+                    wall += time.perf_counter() - began
+                current = self._states(float(t))
+                bad = divergence_reason(current) or self.divergence(current)
+                if bad:
+                    raise _CheckFailed(bad)
+                last_good = float(t)
+                if index < len(grid.sample_times):
+                    times.append(float(t))
+                    states.append(current)
+        except _CheckFailed as error:
+            status, reason, failure_time = "diverged", str(error), last_good
+        except RunFailure as error:
+            status, reason, failure_time = error.status, error.reason, self._last_good(last_good)
+        except Exception as error:  # an engine failure is a result, not a crash (DESIGN rule 6)
+            status, reason, failure_time = "failed", describe(error), self._last_good(last_good)
+        run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
+                   steps=self.steps, counters=self.counters(), notes=list(self.notes))
+        if not states:
+            return Trajectory.empty(n_bodies, **run)
+        return Trajectory.from_samples(times, states, **run)
+
+    def _last_good(self, checked: float) -> float:
+        """The later of the last state this loop checked and the stepper's own last good one."""
+        return checked if self.t_good is None else max(checked, float(self.t_good))
+
+
+class _CheckFailed(Exception):
+    """A state read by the run loop failed the divergence check."""
 
 
 @dataclass(frozen=True)
@@ -93,10 +345,80 @@ class Adapter(abc.ABC):
     def build(self, mechanism: Mechanism):
         """Engine model of ``mechanism``; raises :class:`UnsupportedCase` with a reason."""
 
-    @abc.abstractmethod
+    def export(self, mechanism: Mechanism) -> str:
+        """The engine's own model file for ``mechanism`` (text), for ``mbh export``.
+
+        Raises
+        ------
+        UnsupportedCase
+            When the engine has no model file format (this default) or cannot represent
+            ``mechanism``.
+        """
+        raise UnsupportedCase(f"the {self.name} adapter has no model file to export")
+
     def simulate(self, model, method: str, dt: float, t_end: float,
                  sample_times: np.ndarray) -> Trajectory:
-        """Run from the harness's assembled state; failures are a status, never an exception."""
+        """Run ``method`` from the harness's assembled state and sample every body.
+
+        Parameters
+        ----------
+        model
+            From :meth:`build`.
+        method : str
+            ``NAME[:key=value,...]``, see :meth:`methods`.
+        dt : float
+            Step (first-step hint of an adaptive method), s.
+        t_end : float
+            End time, s; an integer multiple of ``dt``.
+        sample_times : ndarray, shape (k,)
+            Increasing times in [0, t_end], s; on the step grid for fixed-step methods.
+
+        Returns
+        -------
+        Trajectory
+            Failures are a status with the samples before them (see the module notes).
+
+        Raises
+        ------
+        ValueError
+            For an unknown method or parameter, or times that break :func:`check_run_times`.
+        """
+        spec, params = self.method_spec(method)
+        self._check_params(spec, params)
+        fixed = self._fixed_step(spec, params)
+        times = check_run_times(dt, t_end, sample_times, fixed_step=fixed)
+        grid = RunGrid(float(dt), float(t_end), times, fixed)
+        n_bodies = len(self._mechanism(model).bodies)
+        try:
+            stepper = self._start(model, spec, params, grid)
+        except UnsupportedCase as error:
+            return Trajectory.empty(n_bodies, status="unsupported", reason=str(error))
+        except Exception as error:  # the engine refused the start: a result (DESIGN rule 6)
+            return Trajectory.empty(n_bodies, status="failed", reason=describe(error),
+                                    failure_time=0.0)
+        try:
+            return stepper.run(grid, n_bodies)
+        finally:
+            stepper.close()
+
+    @abc.abstractmethod
+    def _start(self, model, spec: MethodSpec, params: dict, grid: RunGrid) -> Stepper:
+        """A :class:`Stepper` holding the engine at the harness's assembled start (t = 0).
+
+        Raises :class:`UnsupportedCase` when the engine cannot run this method on this model; any
+        other exception makes the run ``failed`` at t = 0 with no samples.
+        """
+
+    def _check_params(self, spec: MethodSpec, params: dict) -> None:
+        """Raise a ValueError for resolved parameters the engine cannot take (default: none)."""
+
+    def _fixed_step(self, spec: MethodSpec, params: dict) -> bool:
+        """Whether the method takes steps of exactly ``dt`` (default: True)."""
+        return True
+
+    def _mechanism(self, model) -> Mechanism:
+        """The mechanism a built model represents (default: ``model.mechanism``)."""
+        return model.mechanism
 
     def method_spec(self, method: str) -> tuple[MethodSpec, dict]:
         """Look up ``method`` and resolve its parameters; unknown names list the valid ones."""

@@ -10,7 +10,17 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-STATUSES = ("ok", "diverged", "failed", "unsupported", "timeout")
+#: How a case ended, the same vocabulary for every adapter (the run loop of
+#: :mod:`adapters.base` classifies):
+#:
+#: * ``ok``: every state the run produced and the loop read was finite and within bounds;
+#: * ``diverged``: a non-finite or exploding state (position, orientation, velocity or angular
+#:   velocity), found by the common check or the engine's own;
+#: * ``failed``: the method stopped (a solver failure, or an exception raised during the run);
+#: * ``unsupported``: the engine cannot represent the mechanism or the method;
+#: * ``timeout``: the case ran out of its time budget (campaign runner);
+#: * ``crashed``: the worker process running the case died (campaign runner).
+STATUSES = ("ok", "diverged", "failed", "unsupported", "timeout", "crashed")
 
 
 @dataclass
@@ -50,7 +60,8 @@ class Trajectory:
     reason : str
         Why the run did not end ``ok`` (empty otherwise).
     failure_time : float or None
-        Simulation time at which it failed, s.
+        Time of the last good state (the last state the method produced that passed the
+        checks) of a run that did not end ``ok``, s; None when it did.
     wall_time_s : float
         Wall time around the stepping only, s.
     steps : int

@@ -1,6 +1,8 @@
 """The Exudyn adapter: the harness's contract over :mod:`.methods` and :mod:`.system`.  ``build``
-only checks that Exudyn can represent the mechanism; every ``simulate`` builds a fresh
-:class:`~adapters.exudyn_adapter.system.ExudynSystem`, with Exudyn's console output off.
+only checks that Exudyn can represent the mechanism; every run builds a fresh
+:class:`~adapters.exudyn_adapter.system.ExudynSystem`, with Exudyn's console output off, and is
+driven by the shared run loop (:meth:`adapters.base.Adapter.simulate`) through
+:class:`_ExudynStepper`.
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ from dataclasses import dataclass
 import exudyn as exu
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec, UnsupportedCase
+from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
 from adapters.exudyn_adapter.methods import (
     _BEST,
     _GENALPHA_PARAMS,
@@ -21,9 +23,9 @@ from adapters.exudyn_adapter.methods import (
     _validate_params,
     _write_period,
 )
-from adapters.exudyn_adapter.system import ExudynSystem, _describe
+from adapters.exudyn_adapter.system import ExudynSystem
 from harness.model import PLANAR_JOINT_TYPES, Mechanism
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates
 
 
 @dataclass(frozen=True)
@@ -80,63 +82,60 @@ class ExudynAdapter(Adapter):
                                           f"Exudyn 2D joints are {', '.join(PLANAR_JOINT_TYPES)}")
         return ExudynModel(mechanism)
 
-    def simulate(self, model: ExudynModel, method: str, dt: float, t_end: float,
-                 sample_times: np.ndarray) -> Trajectory:
-        """Run ``model`` with ``method`` at the fixed step ``dt`` up to ``t_end``.
-
-        Parameters
-        ----------
-        model : ExudynModel
-        method : str
-            ``NAME[:key=value,...]``, see :meth:`methods`.
-        dt, t_end : float
-            Step and end time, s; ``round(t_end / dt)`` steps are taken.
-        sample_times : ndarray, shape (n_samples,)
-            Integer multiples of ``dt`` (0 included); the state after step ``round(t / dt)`` is
-            recorded for each.
-
-        Returns
-        -------
-        Trajectory
-            ``failed`` when Exudyn raises (e.g. Newton does not converge), ``diverged`` when the
-            states stop being finite; the samples reached are kept.
-        """
-        spec, params = self.method_spec(method)
-        _validate_run(dt, t_end, sample_times)
+    def _check_params(self, spec: MethodSpec, params: dict) -> None:
         _validate_params(params)
-        mech = model.mechanism
-        steps = round(t_end / dt)
-        indices = np.rint(np.asarray(sample_times, dtype=float) / dt).astype(int)
-        notes = _notes(mech, spec.name, params)
+
+    def _start(self, model: ExudynModel, spec: MethodSpec, params: dict,
+               grid: RunGrid) -> "_ExudynStepper":
+        return _ExudynStepper(model, spec.name, params, grid)
+
+
+class _ExudynStepper(Stepper):
+    """One Exudyn run at the fixed step ``dt``.
+
+    Exudyn's ``SolveSystem`` takes every step in one call, so the first :meth:`_step_to` runs the
+    whole solve; its sensors store the body states every :func:`_write_period` (a period that
+    hits every sample and ``t_end``).  A failed solve ends the run when a later time is asked for,
+    with the step before the failed one as the last good state; the samples before it are kept.
+    """
+
+    def __init__(self, model: ExudynModel, name: str, params: dict, grid: RunGrid):
+        super().__init__()
+        self.grid = grid
+        self.notes = _notes(model.mechanism, name, params)
+        n_steps = grid.steps(grid.t_end)
+        indices = np.append(np.rint(grid.sample_times / grid.dt).astype(int), n_steps)
         with _quiet():
-            try:
-                system = ExudynSystem(mech, params["rotation"])
-                settings = _settings(params, dt, steps, _write_period(indices, dt))
-            except Exception as error:  # engine exceptions are results (DESIGN rule 5)
-                return Trajectory.empty(len(mech.bodies), status="failed",
-                                        reason=f"model rejected: {_describe(error)}",
-                                        failure_time=0.0, notes=notes)
-            solver = _unenforced_solver(settings) if model._unenforced_joints \
-                else exu.MainSolverImplicitSecondOrder()
-            run = system.run(solver, settings, dt)
-        return system.trajectory(run, indices, dt, notes)
+            self.system = ExudynSystem(model.mechanism, params["rotation"])
+        self.settings = _settings(params, grid.dt, n_steps, _write_period(indices, grid.dt))
+        self.solver = _unenforced_solver(self.settings) if model._unenforced_joints \
+            else exu.MainSolverImplicitSecondOrder()
+        self._outcome = None
+        self._sensed = None
+
+    def _step_to(self, t: float) -> None:
+        if self._outcome is None:
+            with _quiet():
+                self._outcome = self.system.run(self.solver, self.settings, self.grid.dt)
+            self.steps = self._outcome.steps
+            self.t_good = self._outcome.t_good
+        if self._outcome.status != "ok" and self.grid.steps(t) > self._outcome.steps:
+            raise RunFailure(self._outcome.status, self._outcome.reason)
+
+    def _states(self, t: float) -> BodyStates:
+        if self._sensed is None:
+            self._sensed = self.system.sensed(self.grid.dt)
+        states = self._sensed.get(self.grid.steps(t))
+        if states is None:
+            raise RunFailure("failed", f"exudyn stored no sensor sample for t = {t:g} s")
+        return states
+
+    def counters(self) -> dict:
+        return {} if self._outcome is None else dict(self._outcome.counters)
 
 
 # ---------------------------------------------------------------------------------------------
-# validation
-
-
-def _validate_run(dt: float, t_end: float, sample_times) -> None:
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"dt must be a positive finite step, got {dt!r}")
-    if not (np.isfinite(t_end) and round(t_end / dt) >= 1):
-        raise ValueError(f"t_end must be a finite time of at least one step dt, got {t_end!r}")
-    times = np.asarray(sample_times, dtype=float)
-    if times.ndim != 1 or times.size == 0:
-        raise ValueError("sample_times must be a non-empty 1-D array of times")
-    k = times / dt
-    if np.any(np.abs(k - np.rint(k)) > 1e-6) or np.any(times < 0) or np.any(times > t_end + dt / 2):
-        raise ValueError("sample_times must be integer multiples of dt within [0, t_end]")
+# notes
 
 
 def _notes(mech: Mechanism, name: str, params: dict) -> list[str]:

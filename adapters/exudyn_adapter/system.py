@@ -1,6 +1,6 @@
 """The Exudyn system of one run: :class:`ExudynSystem` translates the mechanism into a fresh
 ``SystemContainer`` at the harness's assembled start, runs a solver on it and reads the sensed body
-states back as a :class:`~harness.trajectory.Trajectory`.
+states back as :class:`~harness.trajectory.BodyStates` per stored step.
 
 Model translation
 -----------------
@@ -24,9 +24,7 @@ position, rotation matrix, velocity and angular velocity.
 
 from __future__ import annotations
 
-import itertools
 import math
-import time
 from dataclasses import dataclass
 
 import exudyn as exu
@@ -45,7 +43,7 @@ from harness.model import (
     Mechanism,
     SpringDamper,
 )
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates
 
 _SENSED = ("Position", "RotationMatrix", "Velocity", "AngularVelocity")
 
@@ -99,12 +97,17 @@ _GENERIC_AXES = {
 
 @dataclass
 class _Run:
-    """How the stepping ended: status, reason, failure time, wall time and solver counters."""
+    """How the stepping ended: status, reason, the last good time and solver counters.
+
+    Attributes
+    ----------
+    t_good : float or None
+        Time of the last completed step of a failed run, s (None when it ran to the end).
+    """
 
     status: str
     reason: str
-    failure_time: float | None
-    wall_time_s: float
+    t_good: float | None
     counters: dict
     steps: int
 
@@ -201,7 +204,9 @@ class ExudynSystem:
                    self._frame_marker(joint.body2, joint.point2)]
         self.mbs.AddObject(eii.ObjectJointPrismatic2D(
             name=joint.name, markerNumbers=markers, axisMarker0=list(joint.axis1),
-            normalMarker1=list(joint.normal2), constrainRotation=True))
+            # The in-plane normal: the joint's own normal may be z (perpendicular to an in-plane
+            # axis too), which would leave the slide line unconstrained.
+            normalMarker1=list(np.cross([0.0, 0.0, 1.0], joint.axis2)), constrainRotation=True))
 
     # --- forces -------------------------------------------------------------------------------
 
@@ -257,53 +262,32 @@ class ExudynSystem:
 
     def run(self, solver, settings: exu.SimulationSettings, dt: float) -> _Run:
         """Take the fixed steps ``dt`` (s) of ``settings`` with ``solver``; an exception or a
-        reported failure becomes a ``failed`` :class:`_Run` whose failure time is the end of the
-        step that failed."""
-        start = time.perf_counter()
+        reported failure becomes a ``failed`` :class:`_Run` whose last good time is the end of
+        the step before the one that failed (Exudyn's ``currentTime`` is the failed step's end)."""
         try:
             success = solver.SolveSystem(self.mbs, settings)
             reason = "" if success else f"exudyn solver failed: {solver.GetErrorString()}"
-        except Exception as error:  # Newton failure etc. are results (DESIGN rule 5)
+        except Exception as error:  # Newton failure etc. are results (DESIGN rule 6)
             success, reason = False, _describe(error)
-        wall = time.perf_counter() - start
         if success:
-            return _Run("ok", "", None, wall, _counters(solver),
+            return _Run("ok", "", None, _counters(solver),
                         int(settings.timeIntegration.numberOfSteps))
-        failure_time = float(solver.it.currentTime)
-        return _Run("failed", reason, failure_time, wall, _counters(solver),
-                    max(round(failure_time / dt) - 1, 0))
+        steps = max(round(float(solver.it.currentTime) / dt) - 1, 0)
+        return _Run("failed", reason, steps * dt, _counters(solver), steps)
 
-    def trajectory(self, run: _Run, indices: np.ndarray, dt: float,
-                   notes: list[str]) -> Trajectory:
-        """Samples at steps ``indices`` from the sensors, with the run's status."""
+    def sensed(self, dt: float) -> dict[int, BodyStates]:
+        """Body states of every stored sensor row, keyed by step index round(t / dt)."""
         data = {key: self._stored(key) for key in _SENSED}
-        stored_times = data["Position"][:, 0, 0] if data["Position"].size else np.zeros(0)
-        row_of = {int(step): row for row, step in enumerate(np.rint(stored_times / dt))}
-        rows = list(itertools.takewhile(lambda row: row is not None,
-                                        (row_of.get(int(step)) for step in indices)))
-        reached = len(rows)
-        rotations = data["RotationMatrix"][rows, :, 1:10].reshape(reached, -1, 3, 3)
-        arrays = {
-            "position": data["Position"][rows, :, 1:4],
-            "quaternion": np.stack([_quaternions(rotations[:, b], self.start.quaternion[b])
-                                    for b in range(len(self.bodies))], axis=1),
-            "velocity": data["Velocity"][rows, :, 1:4],
-            "angular_velocity": data["AngularVelocity"][rows, :, 1:4],
-        }
-        status, reason, failure_time = run.status, run.reason, run.failure_time
-        finite = np.all([np.isfinite(a).all(axis=(1, 2)) for a in arrays.values()], axis=0)
-        if not finite.all():
-            reached = int(np.argmin(finite))
-            status, reason = "diverged", "non-finite body states"
-            failure_time = float(indices[reached] * dt)
-        elif status == "ok" and reached < len(indices):
-            status = "failed"
-            reason = f"exudyn stored no sensor sample for t = {indices[reached] * dt:g} s"
-        return Trajectory(
-            times=indices[:reached] * dt,
-            **{key: value[:reached] for key, value in arrays.items()},
-            status=status, reason=reason, failure_time=failure_time,
-            wall_time_s=run.wall_time_s, steps=run.steps, counters=run.counters, notes=notes)
+        if not data["Position"].size:
+            return {}
+        rotations = data["RotationMatrix"][:, :, 1:10].reshape(len(data["Position"]), -1, 3, 3)
+        quaternions = np.stack([_quaternions(rotations[:, b], self.start.quaternion[b])
+                                for b in range(len(self.bodies))], axis=1)
+        steps = np.rint(data["Position"][:, 0, 0] / dt).astype(int)
+        return {int(step): BodyStates(data["Position"][row, :, 1:4], quaternions[row],
+                                      data["Velocity"][row, :, 1:4],
+                                      data["AngularVelocity"][row, :, 1:4])
+                for row, step in enumerate(steps)}
 
     def _stored(self, key: str) -> np.ndarray:
         """Stored sensor rows of every body, shape (n_rows, n_bodies, 1 + n_values)."""

@@ -11,16 +11,14 @@ from __future__ import annotations
 
 import itertools
 
-import numpy as np
-
-from adapters.base import Adapter, MethodSpec, parse_method
-from adapters.inhouse import driver
+from adapters.base import Adapter, MethodSpec, RunGrid, Stepper, UnsupportedCase, parse_method
+from adapters.inhouse.driver import InhouseStepper
 from adapters.integrators import integrator_class, integrator_names, integrator_params
 from adapters.inhouse.newton_euler import NewtonEuler
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import STRATEGIES
 from harness.model import Mechanism
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates
 
 FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning,
                 NewtonEuler.name: NewtonEuler}
@@ -83,40 +81,61 @@ class InhouseAdapter(Adapter):
     def build(self, mechanism: Mechanism) -> Mechanism:
         return mechanism
 
-    def simulate(self, model: Mechanism, method: str, dt: float, t_end: float,
-                 sample_times: np.ndarray) -> Trajectory:
-        spec, params = self.method_spec(method)
+    def _mechanism(self, model: Mechanism) -> Mechanism:
+        return model
+
+    def _check_params(self, spec: MethodSpec, params: dict) -> None:
         if spec.name == "ida":
-            return _ida_trajectory(model, t_end, sample_times, params)
+            from adapters.inhouse.dae import check_ida_params
+            check_ida_params(params)
+
+    def _fixed_step(self, spec: MethodSpec, params: dict) -> bool:
+        return spec.name != "ida" and not integrator_class(_split(spec.name)[0]).adaptive
+
+    def _start(self, model: Mechanism, spec: MethodSpec, params: dict, grid: RunGrid) -> Stepper:
+        if spec.name == "ida":
+            return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)
         formulation = FORMULATIONS[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
-            return Trajectory.empty(len(model.bodies), status="unsupported", reason=reason)
+            raise UnsupportedCase(reason)
         own = {k: v for k, v in params.items() if k in formulation.defaults}
         rest = {k: v for k, v in params.items() if k not in formulation.defaults}
+        return InhouseStepper(model, formulation, integrator, rest, own, grid)
+
+
+class _IdaStepper(Stepper):
+    """SUNDIALS IDA on the DAE of motion (:mod:`adapters.inhouse.dae`) from the assembled state;
+    samples from IDA's interpolant, failures at the last step IDA completed."""
+
+    def __init__(self, mech: Mechanism, params: dict, grid: RunGrid):
+        from adapters.inhouse.constraints import layout_of
+        from adapters.inhouse.dae import DaeModel, IdaIntegration
+        from adapters.inhouse.kinematics import common_start
+
+        super().__init__()
+        assembly = common_start(mech)
+        self.layout = layout_of(mech)
+        model = DaeModel(mech, assembly.q, params["form"])
+        self.integration = IdaIntegration(
+            model, assembly.q, assembly.v, grid.t_end, rtol=params["rtol"], atol=params["atol"],
+            max_steps=params["max_steps"], jacobian=params["jacobian"])
+
+    def _step_to(self, t: float) -> None:
         try:
-            return driver.simulate(model, formulation, integrator, rest, own, dt, t_end, sample_times)
-        except (ArithmeticError, np.linalg.LinAlgError, ValueError) as error:
-            return Trajectory.empty(len(model.bodies), status="failed",
-                                    reason=f"{type(error).__name__}: {error}", failure_time=0.0)
+            self.integration.advance_to(t)
+        finally:
+            self.steps = self.integration.steps
+            self.t_good = self.integration.t
 
+    def _states(self, t: float) -> BodyStates:
+        from adapters.inhouse.states import body_states
 
-def _ida_trajectory(mech: Mechanism, t_end: float, sample_times, params: dict) -> Trajectory:
-    """Run IDA from the assembled state and convert its samples to body states."""
-    import time
+        n = self.integration.model.n
+        y = self.integration.state_at(t)
+        return body_states(self.layout, y[:n], y[n:2 * n])
 
-    from adapters.inhouse.constraints import layout_of
-    from adapters.inhouse.dae import simulate_ida
-    from adapters.inhouse.kinematics import assemble
-    from adapters.inhouse.states import trajectory_from_coordinates
-
-    assembly = assemble(mech)
-    began = time.perf_counter()
-    result = simulate_ida(mech, assembly.q, assembly.v, t_end, sample_times, **params)
-    wall = time.perf_counter() - began
-    counters = {k: v for k, v in result.counters.items() if k != "steps" and v is not None}
-    return trajectory_from_coordinates(
-        layout_of(mech), result.times, result.q, result.v, status=result.status,
-        reason=result.reason or "", failure_time=result.failure_time, wall_time_s=wall,
-        steps=result.counters.get("steps", 0), counters=counters)
+    def counters(self) -> dict:
+        return {key: value for key, value in self.integration.counters().items()
+                if key != "steps" and value is not None}

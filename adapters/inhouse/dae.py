@@ -77,6 +77,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import sksundae
 
+from adapters.base import RunFailure, describe
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, solve_augmented
 from adapters.inhouse.rank import full_pivot_elimination
@@ -103,6 +104,17 @@ def ida_params() -> dict:
     return dict(_DEFAULTS)
 
 
+def check_ida_params(params: dict) -> None:
+    """Raise a ValueError naming ``form``, ``jacobian`` or ``max_steps`` when it is invalid."""
+    if params["form"] not in FORMS:
+        raise ValueError(f"form must be one of {', '.join(FORMS)}, got {params['form']!r}")
+    if params["jacobian"] not in JACOBIANS:
+        raise ValueError(f"jacobian must be one of {', '.join(JACOBIANS)}, "
+                         f"got {params['jacobian']!r}")
+    if int(params["max_steps"]) < 1:
+        raise ValueError(f"max_steps must be >= 1, got {params['max_steps']!r}")
+
+
 @dataclass
 class IdaResult:
     """Samples and cost of one IDA run.
@@ -122,7 +134,7 @@ class IdaResult:
     reason : str or None
         Why it stopped early (IDA's message and flag, or the limit hit).
     failure_time : float or None
-        The last time IDA reached, s.
+        Time of the last good state (the last step IDA completed that passed the checks), s.
     counters : dict
         ``steps``, ``rhs_evals``, ``jacobian_evals``, ``factorizations``, ``newton_iterations``
         (``None``: not exposed), ``kernel_evals`` (see the module notes).
@@ -317,13 +329,10 @@ def simulate_ida(mech: Mechanism, q0, v0, t_end: float, sample_times, rtol: floa
         For invalid arguments (unknown form or Jacobian, bad shapes, sample times outside
         [0, t_end] or decreasing).
     """
-    if jacobian not in JACOBIANS:
-        raise ValueError(f"jacobian must be one of {', '.join(JACOBIANS)}, got {jacobian!r}")
+    check_ida_params({"jacobian": jacobian, "max_steps": max_steps, "form": form})
     t_end = float(t_end)
     if not (np.isfinite(t_end) and t_end > 0.0):
         raise ValueError(f"t_end must be finite and > 0, got {t_end!r}")
-    if int(max_steps) < 1:
-        raise ValueError(f"max_steps must be >= 1, got {max_steps!r}")
     samples = np.asarray(sample_times, dtype=float)
     if samples.ndim != 1 or np.any(np.diff(samples) < 0) or np.any(samples < 0) \
             or np.any(samples > t_end):
@@ -334,80 +343,107 @@ def simulate_ida(mech: Mechanism, q0, v0, t_end: float, sample_times, rtol: floa
     if q0.shape != (model.n,) or v0.shape != (model.n,):
         raise ValueError(f"q0 and v0 must have shape ({model.n},), got {q0.shape}, {v0.shape}")
 
-    y0, yp0 = model.initial(q0, v0)
-    per_component_atol, algebraic = model.tolerances(atol)
-    options = dict(rtol=float(rtol), atol=per_component_atol, algebraic_idx=algebraic,
-                   max_num_steps=int(max_steps))
-    if jacobian == "kernels":
-        options["jacfn"] = model.iteration_matrix
-    solver = sksundae.ida.IDA(model.residual, **options)
-    run = _Run(model, samples)
-    run.record_until(0.0, y0)
+    integration = IdaIntegration(model, q0, v0, t_end, rtol=rtol, atol=atol,
+                                 max_steps=max_steps, jacobian=jacobian)
+    taken: list[tuple[float, np.ndarray]] = []
+    status, reason, failure_time = "ok", None, None
     try:
-        solver.init_step(0.0, y0, yp0)
-        run.advance(solver, t_end, int(max_steps))
+        for t in (*samples, t_end):
+            integration.advance_to(float(t))
+            if len(taken) < samples.size:
+                taken.append((float(t), integration.state_at(float(t))))
+    except RunFailure as failure:
+        status, reason, failure_time = failure.status, failure.reason, integration.t
     except (RuntimeError, FloatingPointError, ValueError, np.linalg.LinAlgError) as exc:
-        run.fail("failed", f"{type(exc).__name__}: {exc}")
-    return run.result()
+        status, reason, failure_time = "failed", describe(exc), integration.t
+    n = model.n
+    states = np.array([y for _, y in taken]).reshape(len(taken), -1)
+    return IdaResult(np.array([t for t, _ in taken]), states[:, :n].reshape(-1, n),
+                     states[:, n:2 * n].reshape(-1, n), status, reason, failure_time,
+                     integration.counters())
 
 
-class _Run:
-    """Bookkeeping of one IDA run: samples taken, steps, status."""
+class IdaIntegration:
+    """One IDA integration of a :class:`DaeModel` from a consistent start, step by step.
 
-    def __init__(self, model: DaeModel, samples: np.ndarray):
+    Parameters
+    ----------
+    model : DaeModel
+    q0, v0 : ndarray, shape (n,)
+        Consistent initial coordinates and velocities.
+    t_end : float
+        IDA never steps past it (``tstop``), s.
+    rtol, atol, max_steps, jacobian
+        As :func:`simulate_ida`.
+
+    Attributes
+    ----------
+    t : float
+        Time of the last good state (the last step IDA completed and the checks passed), s.
+    steps : int
+        Internal steps taken (one ``onestep`` call each).
+    """
+
+    def __init__(self, model: DaeModel, q0: np.ndarray, v0: np.ndarray, t_end: float,
+                 rtol: float, atol: float, max_steps: int, jacobian: str):
         self.model = model
-        self.samples = samples
-        self.taken: list[tuple[float, np.ndarray]] = []
+        self.t_end = float(t_end)
+        self.max_steps = int(max_steps)
+        self.y, yp0 = model.initial(q0, v0)
+        per_component_atol, algebraic = model.tolerances(atol)
+        options = dict(rtol=float(rtol), atol=per_component_atol, algebraic_idx=algebraic,
+                       max_num_steps=self.max_steps)
+        if jacobian == "kernels":
+            options["jacfn"] = model.iteration_matrix
+        self.solver = sksundae.ida.IDA(model.residual, **options)
+        self._yp0 = yp0
+        self._started = False
         self.t = 0.0
         self.steps = 0
         self.njev = 0
-        self.status = "ok"
-        self.reason: str | None = None
-        self.failure_time: float | None = None
 
-    def record_until(self, t: float, y: np.ndarray, solver=None) -> None:
-        """Take every pending sample ≤ t: y itself at t, IDA's interpolant before it."""
-        while len(self.taken) < self.samples.size and self.samples[len(self.taken)] <= t:
-            ts = float(self.samples[len(self.taken)])
-            if ts == t or solver is None:
-                self.taken.append((ts, np.array(y)))
-                continue
-            out = solver.step(ts)
-            if not out.success:
-                raise RuntimeError(f"interpolation at t = {ts}: {out.message}")
-            self.taken.append((ts, np.array(out.y)))
+    def advance_to(self, t: float) -> None:
+        """One IDA step per ``onestep`` call (stopping exactly at t_end) until ``t`` is reached.
 
-    def advance(self, solver, t_end: float, max_steps: int) -> None:
-        """One IDA step per call of ``onestep`` (stopping exactly at t_end) until t_end."""
-        while self.t < t_end:
-            if self.steps >= max_steps:
-                self.fail("failed", f"max_steps={max_steps} reached before t_end={t_end:g} s")
-                return
-            out = solver.step(t_end, method="onestep", tstop=t_end)
+        Raises
+        ------
+        RunFailure
+            ``failed`` (IDA's flag and message, or ``max_steps`` reached) or ``diverged``
+            (non-finite state, or q or v 2-norm above :data:`DIVERGENCE_LIMIT`); :attr:`t` stays
+            the last good time.
+        """
+        if not self._started and self.t < t:
+            self.solver.init_step(0.0, self.y, self._yp0)
+            self._started = True
+        while self.t < t:
+            if self.steps >= self.max_steps:
+                raise RunFailure("failed", f"max_steps={self.max_steps} reached before "
+                                           f"t_end={self.t_end:g} s")
+            out = self.solver.step(self.t_end, method="onestep", tstop=self.t_end)
             self.njev = int(out.njev)
             if not out.success:
-                self.fail("failed", f"IDA flag {out.status}: {out.message}")
-                return
+                raise RunFailure("failed", f"IDA flag {out.status}: {out.message}")
             self.steps += 1
-            self.t = float(out.t)
             q, v, _, _ = self.model.split(out.y)
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-                self.fail("diverged", "non-finite state")
-                return
+                raise RunFailure("diverged", "non-finite state")
             if max(np.linalg.norm(q), np.linalg.norm(v)) > DIVERGENCE_LIMIT:
-                self.fail("diverged", f"state norm exceeds {DIVERGENCE_LIMIT:g}")
-                return
-            self.record_until(self.t, out.y, solver)
+                raise RunFailure("diverged", f"state norm exceeds {DIVERGENCE_LIMIT:g}")
+            self.t, self.y = float(out.t), np.array(out.y)
 
-    def fail(self, status: str, reason: str) -> None:
-        self.status, self.reason, self.failure_time = status, reason, self.t
+    def state_at(self, t: float) -> np.ndarray:
+        """y at ``t`` (s): the last step's state at its own time, IDA's interpolant before it,
+        shape (size,)."""
+        if t == self.t:
+            return self.y.copy()
+        out = self.solver.step(t)
+        if not out.success:
+            raise RuntimeError(f"interpolation at t = {t}: {out.message}")
+        return np.array(out.y)
 
-    def result(self) -> IdaResult:
-        n = self.model.n
-        times = np.array([t for t, _ in self.taken])
-        states = np.array([y for _, y in self.taken]).reshape(len(self.taken), -1)
-        counters = {"steps": self.steps, "rhs_evals": self.model.n_residual,
-                    "jacobian_evals": self.njev, "factorizations": self.njev,
-                    "newton_iterations": None, "kernel_evals": self.model.n_kernel}
-        return IdaResult(times, states[:, :n].reshape(-1, n), states[:, n:2 * n].reshape(-1, n),
-                         self.status, self.reason, self.failure_time, counters)
+    def counters(self) -> dict:
+        """``steps``, ``rhs_evals``, ``jacobian_evals``, ``factorizations``,
+        ``newton_iterations`` (None: not exposed), ``kernel_evals`` (see the module notes)."""
+        return {"steps": self.steps, "rhs_evals": self.model.n_residual,
+                "jacobian_evals": self.njev, "factorizations": self.njev,
+                "newton_iterations": None, "kernel_evals": self.model.n_kernel}

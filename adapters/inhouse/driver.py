@@ -1,148 +1,162 @@
-"""Run one in-house case: a formulation (stabilisation strategy) integrated by one method from the
-assembled initial state, sampled into a :class:`~harness.trajectory.Trajectory`.
+"""The in-house stepper: a formulation (stabilisation strategy) integrated by one method from the
+assembled initial state, driven by the shared run loop (:meth:`adapters.base.Adapter.simulate`).
 
-Fixed-step methods take round(t_end/dt) steps and are sampled after step round(t_s/dt); adaptive
-methods are sampled through their dense output.  A failed or diverged integrator ends the run with
-the samples reached so far.
+Fixed-step methods are read after step round(t / dt).  Adaptive methods are read at the sample
+times: the state of the step that ends there, else the solver's dense output inside the last
+step.  Dense output is not a state the method carried when the formulation corrects the state
+after every step (``direct``, ``geometric``, ``massproj``): it is then projected at each sample
+time (:meth:`InhouseStepper._carried`: the position projection of seed 002 eq. 127 and the
+velocity projection of eq. 137, the ``direct`` strategy's correction, or the formulation's own
+when it has no position projection), so that the reported constraint violations and energies
+are those of states on the manifold the method keeps its steps on.  That projection is a reading, not part of
+the method: its cost is not counted, and the integration goes on from the step's own state.
 """
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
+from adapters.base import RunFailure, RunGrid, Stepper
 from adapters.inhouse.constraints import layout_of
-from adapters.integrators import RUNNING, make_integrator
-from adapters.inhouse.kinematics import assemble
-from adapters.inhouse.states import trajectory_from_coordinates
+from adapters.inhouse.kinematics import common_start
 from adapters.inhouse.stabilisation import Formulation
+from adapters.inhouse.states import body_states
+from adapters.integrators import RUNNING, SecondOrderSystem, make_integrator
 from harness.model import Mechanism
-from harness.trajectory import Trajectory
+from harness.trajectory import BodyStates
 
 _INTEGRATOR_COUNTERS = {"rhs_evals": "nfev", "jacobian_evals": "njev", "factorizations": "nlu",
                         "newton_iterations": "n_newton"}
 
-
-class _Run:
-    """Mutable state of one run: the current integrator, its predecessors' costs, the samples."""
-
-    def __init__(self, mech: Mechanism, formulation: Formulation, integrator_name: str,
-                 integrator_params: dict, dt: float):
-        self.mech = mech
-        self.layout = layout_of(mech)
-        self.formulation = formulation
-        self.integrator_name = integrator_name
-        self.integrator_params = integrator_params
-        self.dt = dt
-        self.times: list[float] = []
-        self.samples: list[tuple[np.ndarray, np.ndarray]] = []
-        self.spent = dict.fromkeys(_INTEGRATOR_COUNTERS, 0)
-        self.steps = 0
-        self.wall = 0.0
-        self.integrator = None
-
-    def start(self, t: float, q_full: np.ndarray, v_full: np.ndarray) -> None:
-        """(Re)start the integrator from a full state, keeping the cost of the previous one."""
-        if self.integrator is not None:
-            self._bank()
-        q, v = self.formulation.reduce(q_full, v_full)
-        self.integrator = make_integrator(self.integrator_name, self.formulation, t, q, v, self.dt,
-                                          **self.integrator_params)
-
-    def _bank(self) -> None:
-        for key, attribute in _INTEGRATOR_COUNTERS.items():
-            self.spent[key] += getattr(self.integrator, attribute)
-        self.steps += self.integrator.n_steps
-
-    def step(self) -> str:
-        began = time.perf_counter()
-        status = self.integrator.step()
-        self.wall += time.perf_counter() - began
-        return status
-
-    def repartition_if_needed(self) -> None:
-        """Choose the integrated coordinates again when the formulation asks (partitioning)."""
-        q, v = self.full_state()
-        if self.formulation.needs_repartition(q):
-            self.formulation.choose_partition(q)
-            self.start(self.integrator.t, q, v)
-
-    def full_state(self, t=None, q=None, v=None):
-        integrator = self.integrator
-        if t is None:
-            t, q, v = integrator.t, integrator.q, integrator.v
-        return self.formulation.expand(t, q, v)
-
-    def record(self, t: float, q_full: np.ndarray, v_full: np.ndarray) -> None:
-        """Keep a sample; body states are computed for the whole run at the end."""
-        self.times.append(t)
-        self.samples.append((np.array(q_full, dtype=float), np.array(v_full, dtype=float)))
-
-    def trajectory(self) -> Trajectory:
-        self._bank()
-        integrator = self.integrator
-        status = "ok" if integrator.status == RUNNING else integrator.status
-        counters = {key: self.spent[key] + self.formulation.counters.get(key, 0)
-                    for key in self.spent}
-        counters["repartitions"] = getattr(self.formulation, "repartitions", 0)
-        return trajectory_from_coordinates(
-            self.layout, self.times, [q for q, _ in self.samples], [v for _, v in self.samples],
-            status=status, reason=integrator.failure_reason or "",
-            failure_time=integrator.failure_time, wall_time_s=self.wall, steps=self.steps,
-            counters=counters, notes=list(self.formulation.notes))
+#: Note of an adaptive run whose dense-output samples are projected.
+PROJECTED_SAMPLES_NOTE = ("adaptive steps with projection: states between steps (dense output) "
+                          "are projected onto the constraints at each sample time (positions "
+                          "002 eq. 127, velocities eq. 137); the projection is not counted")
 
 
-def simulate(mech: Mechanism, formulation_class, integrator_name: str, integrator_params: dict,
-             formulation_params: dict, dt: float, t_end: float, sample_times) -> Trajectory:
-    """Integrate ``mech`` from its assembled state and sample it.
+class InhouseStepper(Stepper):
+    """One run of ``formulation_class`` integrated by ``integrator_name``.
 
     Parameters
     ----------
+    mech : Mechanism
     formulation_class : type[Formulation]
     integrator_name : str
         A name from :func:`adapters.integrators.integrator_names`.
-    dt : float
-        Fixed step, or first-step hint of an adaptive method, s.
-    t_end : float
-        s.
-    sample_times : ndarray, shape (k,)
-        Increasing times in [0, t_end], s.
+    integrator_params, formulation_params : dict
+        Resolved parameters of each part.
+    grid : RunGrid
+        ``dt`` is the fixed step, or the first-step hint of an adaptive method.
+
+    Attributes
+    ----------
+    formulation : Formulation
+    integrator : Integrator
+        The current one (coordinate partitioning restarts it at every re-partition).
     """
-    assembly = assemble(mech)
-    formulation = formulation_class(mech, assembly.q, dt, **formulation_params)
-    formulation.start(assembly.q, assembly.v)
-    formulation.warm_up(assembly.q, assembly.v)
-    run = _Run(mech, formulation, integrator_name, integrator_params, dt)
-    run.start(0.0, assembly.q, assembly.v)
-    samples = np.asarray(sample_times, dtype=float)
-    if samples.size and samples[0] == 0.0:
-        run.record(0.0, assembly.q, assembly.v)
-        samples = samples[1:]
-    if run.integrator.adaptive:
-        _integrate_adaptive(run, t_end, samples)
-    else:
-        _integrate_fixed(run, t_end, samples)
-    return run.trajectory()
 
+    def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
+                 integrator_params: dict, formulation_params: dict, grid: RunGrid):
+        super().__init__()
+        self.grid = grid
+        self.layout = layout_of(mech)
+        assembly = common_start(mech)
+        self._start_state = (assembly.q, assembly.v)
+        formulation = formulation_class(mech, assembly.q, grid.dt, **formulation_params)
+        formulation.start(assembly.q, assembly.v)
+        formulation.warm_up(assembly.q, assembly.v)
+        self.formulation: Formulation = formulation
+        self.integrator_name, self.integrator_params = integrator_name, integrator_params
+        self._spent = dict.fromkeys(_INTEGRATOR_COUNTERS, 0)
+        self._banked_steps = 0
+        self.integrator = None
+        self._restart(0.0, assembly.q, assembly.v)
+        self._adaptive = self.integrator.adaptive
+        corrects = type(formulation).project is not SecondOrderSystem.project
+        self._project_samples = self._adaptive and corrects
+        self.notes = list(formulation.notes)
+        if self._project_samples:
+            self.notes.append(PROJECTED_SAMPLES_NOTE)
+        self._repartition_due = False
 
-def _integrate_fixed(run: _Run, t_end: float, samples: np.ndarray) -> None:
-    wanted = {int(round(t / run.dt)): t for t in samples}
-    for k in range(1, int(round(t_end / run.dt)) + 1):
-        if run.step() != RUNNING:
-            return
-        if k in wanted:
-            run.record(wanted[k], *run.full_state())
-        run.repartition_if_needed()
+    # -- stepping ------------------------------------------------------------------------------
+    def _step_to(self, t: float) -> None:
+        if self._adaptive:
+            while self.integrator.t < t:
+                self._step()
+        else:
+            while self.steps < self.grid.steps(t):
+                self._step()
 
+    def _step(self) -> None:
+        """One integrator step; the re-partition check of the previous step's state first."""
+        if self._repartition_due:
+            self._repartition_if_needed()
+        integrator = self.integrator
+        status = integrator.step()
+        self.steps = self._banked_steps + integrator.n_steps
+        self.t_good = integrator.t
+        if status != RUNNING:
+            raise RunFailure(status, integrator.failure_reason or status)
+        self._repartition_due = True
 
-def _integrate_adaptive(run: _Run, t_end: float, samples: np.ndarray) -> None:
-    pending = list(samples)
-    while pending:
-        if run.step() != RUNNING:
-            return
-        integrator = run.integrator
-        while pending and pending[0] <= integrator.t:
-            t = pending.pop(0)
-            run.record(t, *run.full_state(t, *integrator.dense(t)))
-        run.repartition_if_needed()
+    def _restart(self, t: float, q_full: np.ndarray, v_full: np.ndarray) -> None:
+        """(Re)start the integrator from a full state, keeping the cost of the previous one."""
+        if self.integrator is not None:
+            for key, attribute in _INTEGRATOR_COUNTERS.items():
+                self._spent[key] += getattr(self.integrator, attribute)
+            self._banked_steps += self.integrator.n_steps
+        q, v = self.formulation.reduce(q_full, v_full)
+        self.integrator = make_integrator(self.integrator_name, self.formulation, t, q, v,
+                                          self.grid.dt, **self.integrator_params)
+
+    def _repartition_if_needed(self) -> None:
+        """Choose the integrated coordinates again when the formulation asks (partitioning)."""
+        self._repartition_due = False
+        integrator = self.integrator
+        q, v = self.formulation.expand(integrator.t, integrator.q, integrator.v)
+        if self.formulation.needs_repartition(q):
+            self.formulation.choose_partition(q)
+            self._restart(integrator.t, q, v)
+
+    # -- reading -------------------------------------------------------------------------------
+    def _states(self, t: float) -> BodyStates:
+        return body_states(self.layout, *self._coordinates(t))
+
+    def _coordinates(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Full (q, q̇) at ``t``: the start, the current step's state, or projected dense output."""
+        integrator = self.integrator
+        if self.steps == 0:
+            return self._start_state
+        if not self._adaptive or t == integrator.t:
+            return self.formulation.expand(integrator.t, integrator.q, integrator.v)
+        q, v = self.formulation.expand(t, *integrator.dense(t))
+        return self._carried(t, q, v) if self._project_samples else (q, v)
+
+    def _carried(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q, q̇) at ``t`` put back on the constraints; the formulation's counters are left as
+        they were.
+
+        A formulation with a position projection (``direct``, ``geometric``) gets it (002
+        eq. 127) followed by the velocity projection q̇ − Φ_q⁺ Φ_q q̇ (eq. 137, minimum-norm least
+        squares): ``geometric``'s own velocity correction integrates the work along the steps and
+        cannot be replayed at a sample.  Any other correcting formulation (``massproj``) gets its
+        own ``project``, which must be a function of the state alone.
+        """
+        formulation = self.formulation
+        counters = dict(formulation.counters)
+        if hasattr(formulation, "project_position"):
+            q = formulation.project_position(t, q)
+            jac = formulation.jacobian(t, q)
+            v = v - np.linalg.lstsq(jac, jac @ v, rcond=None)[0]
+        else:
+            q, v = formulation.project(t, q, v)
+        formulation.counters.update(counters)
+        return q, v
+
+    def counters(self) -> dict:
+        counters = {key: self._spent[key] + getattr(self.integrator, attribute)
+                    + self.formulation.counters.get(key, 0)
+                    for key, attribute in _INTEGRATOR_COUNTERS.items()}
+        counters["repartitions"] = getattr(self.formulation, "repartitions", 0)
+        return counters

@@ -10,19 +10,17 @@ parameter, only the defaults differ.
 
 from __future__ import annotations
 
-import time
-
-import numpy as np
 import pinocchio as pin
 
-from adapters.base import Adapter, MethodSpec
+from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
 from adapters.integrators import RUNNING, integrator_names, make_integrator
 from adapters.pinocchio_adapter.build import PinocchioModel, build_model
-from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
+from adapters.pinocchio_adapter.dynamics import SolverSettings
 from adapters.pinocchio_adapter.state import body_states, joint_state
+from adapters.pinocchio_adapter.stepping import constrained_problem
 from harness.initial import initial_state
 from harness.model import Mechanism
-from harness.trajectory import BodyStates, Trajectory
+from harness.trajectory import BodyStates
 
 _PIN_DEFAULTS = pin.ProximalSettings()
 #: Parameters every method takes, at Pinocchio's own defaults (``ProximalSettings()`` as
@@ -84,79 +82,56 @@ class PinocchioAdapter(Adapter):
         """The Pinocchio model of ``mechanism`` (see :func:`.build.build_model`)."""
         return build_model(mechanism)
 
-    def simulate(self, model: PinocchioModel, method: str, dt: float, t_end: float,
-                 sample_times: np.ndarray) -> Trajectory:
-        """Integrate from the harness's assembled state and sample every body.
-
-        Parameters
-        ----------
-        model : PinocchioModel
-            From :meth:`build`.
-        method : str
-            ``NAME[:key=value,...]``; see :meth:`methods`.
-        dt, t_end : float
-            Step and end time, s; ``round(t_end / dt)`` steps are taken.
-        sample_times : ndarray, shape (n_samples,)
-            Integer multiples of ``dt`` (0 included); the state after step ``round(t / dt)`` is
-            recorded.
-
-        Returns
-        -------
-        Trajectory
-            ``failed`` with the reason when Pinocchio returns NaN or the projection or the start
-            conversion fails, ``diverged`` when the state blows up; the samples before it.
-
-        Raises
-        ------
-        ValueError
-            For an unknown method, parameter or integrator name.
-        """
-        _, params = self.method_spec(method)
+    def _check_params(self, spec: MethodSpec, params: dict) -> None:
         if params["integrator"] not in integrator_names():
             raise ValueError(f"unknown integrator {params['integrator']!r}; valid: "
                              f"{', '.join(integrator_names())}")
-        settings = solver_settings(params)
-        n_bodies = len(model.mechanism.bodies)
-        notes = list(model.notes)
-        problem = ConstrainedProblem(model, settings)
-        try:
-            start = initial_state(model.mechanism)
-            q0, v0 = joint_state(model, problem.kin_data, start)
-        except ValueError as exc:
-            return Trajectory.empty(n_bodies, status="failed", failure_time=0.0, notes=notes,
-                                    reason=f"no joint-coordinate start: {exc}")
-        try:
-            integrator = make_integrator(params["integrator"], problem, 0.0, q0, v0, dt)
-        except ValueError as exc:
-            return Trajectory.empty(n_bodies, status="unsupported", reason=str(exc), notes=notes)
-        return _run(model, problem, integrator, start, dt, t_end, np.asarray(sample_times),
-                    notes)
 
-def _run(pm: PinocchioModel, problem: ConstrainedProblem, integrator, start: BodyStates,
-         dt: float, t_end: float, sample_times: np.ndarray, notes: list) -> Trajectory:
-    """Step ``integrator`` to ``t_end``, recording the samples; wall time of the stepping only.
+    def _start(self, model: PinocchioModel, spec: MethodSpec, params: dict,
+               grid: RunGrid) -> "_PinocchioStepper":
+        return _PinocchioStepper(model, params, grid)
 
-    ``start`` (the harness's initial state) fixes the sign of the first sampled quaternions.
+
+class _PinocchioStepper(Stepper):
+    """One integrator of :mod:`adapters.integrators` driving Pinocchio's constrained dynamics
+    from the harness's assembled start, converted to joint coordinates.
+
+    Samples are read after step ``round(t / dt)``.  The integrator's own check (non-finite or
+    norm above its ``divergence_limit``) and its failures (NaN from Pinocchio, a projection that
+    does not converge) end the run at its last good state.  A start no joint state reproduces
+    raises (``failed`` at t = 0); an integrator that cannot run on Pinocchio's configuration
+    space is ``unsupported``.
     """
-    n_steps = int(round(t_end / dt))
-    sample_steps = np.rint(np.asarray(sample_times) / dt).astype(int)
-    data = pm.model.createData()
-    states = []
-    previous = start.quaternion
-    wall = 0.0
-    for index, target in enumerate(sample_steps):
-        start = time.perf_counter()
-        while integrator.n_steps < min(target, n_steps) and integrator.step() == RUNNING:
-            pass
-        wall += time.perf_counter() - start
-        if integrator.status != RUNNING or target > n_steps:
-            break
-        states.append(body_states(pm, data, integrator.q, integrator.v, previous))
-        previous = states[-1].quaternion
-    status = "ok" if integrator.status == RUNNING else integrator.status
-    counters = {"rhs_evals": integrator.nfev, "factorizations": integrator.nfev,
-                **problem.counters}
-    return Trajectory.from_samples(sample_times, states, status=status,
-                                   reason=integrator.failure_reason or "",
-                                   failure_time=integrator.failure_time, wall_time_s=wall,
-                                   steps=integrator.n_steps, counters=counters, notes=notes)
+
+    def __init__(self, model: PinocchioModel, params: dict, grid: RunGrid):
+        super().__init__()
+        self.pm, self.grid = model, grid
+        self.notes = list(model.notes)
+        self.problem = constrained_problem(model, solver_settings(params))
+        start = initial_state(model.mechanism)
+        q0, v0 = joint_state(model, self.problem.kin_data, start)
+        try:
+            self.integrator = make_integrator(params["integrator"], self.problem, 0.0, q0, v0,
+                                              grid.dt)
+        except ValueError as exc:
+            raise UnsupportedCase(str(exc)) from None
+        self.data = model.model.createData()
+        self._previous = start.quaternion  # fixes the sign of the first sampled quaternions
+
+    def _step_to(self, t: float) -> None:
+        integrator = self.integrator
+        while integrator.n_steps < self.grid.steps(t):
+            status = integrator.step()
+            self.steps, self.t_good = integrator.n_steps, integrator.t
+            if status != RUNNING:
+                raise RunFailure(status, integrator.failure_reason or status)
+
+    def _states(self, t: float) -> BodyStates:
+        states = body_states(self.pm, self.data, self.integrator.q, self.integrator.v,
+                             self._previous)
+        self._previous = states.quaternion
+        return states
+
+    def counters(self) -> dict:
+        return {"rhs_evals": self.integrator.nfev, "factorizations": self.integrator.nfev,
+                **self.problem.counters}

@@ -1,25 +1,25 @@
-"""The PyBullet adapter: its methods (solver settings), the stepping loop with divergence checks,
-and the run that turns an engine failure into a status.
+"""The PyBullet adapter: its methods (solver settings) and its stepper, driven by the shared run
+loop (:meth:`adapters.base.Adapter.simulate`), with Bullet's extra divergence check.
 """
 
 from __future__ import annotations
 
-import math
-import time
-from dataclasses import dataclass
+import contextlib
 
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec
+from adapters.base import Adapter, MethodSpec, RunGrid, Stepper
 from adapters.pybullet_adapter.build import PybulletModel, build_model
 from adapters.pybullet_adapter.loads import _apply_loads, _needs_body_loads, _tree_actuation
 from adapters.pybullet_adapter.quiet import pybullet
 from adapters.pybullet_adapter.state import _read_states
 from adapters.pybullet_adapter.world import bullet_world
 from harness.model import Mechanism
-from harness.trajectory import BodyStates, Trajectory
+from harness.trajectory import BodyStates
 
-#: A run has diverged when a centre of mass leaves a ball this many times the mechanism's size.
+#: A run has diverged when a centre of mass leaves a ball this many times the mechanism's size,
+#: or a speed exceeds this many times the size per second (on top of the common check of
+#: :func:`adapters.base.divergence_reason`: non-finite or beyond 1e8).
 _DIVERGED_SCALE = 1e3
 
 #: PyBullet's own defaults (PhysicsServerCommandProcessor and btContactSolverInfo), checked by the
@@ -45,85 +45,47 @@ _BEST = {**_ENGINE_DEFAULTS, "numSolverIterations": 200, "erp": 1.0, "solverResi
 _SUBSTEPS = {**_BEST, "numSubSteps": 10}
 
 
-def _diverged(states: BodyStates, limit: float) -> bool:
-    arrays = (states.position, states.quaternion, states.velocity, states.angular_velocity)
-    if not all(np.all(np.isfinite(a)) for a in arrays):
-        return True
-    return bool(np.max(np.linalg.norm(states.position, axis=1)) > limit)
+class _BulletStepper(Stepper):
+    """One Bullet world stepped at the fixed step ``dt``; samples are read after step
+    ``round(t / dt)``, the loads re-applied before every step."""
 
+    def __init__(self, model: PybulletModel, params: dict, grid: RunGrid):
+        super().__init__()
+        self.model, self.grid = model, grid
+        self.notes = list(model.notes)
+        self.substeps = max(1, int(params["numSubSteps"]))
+        self.limit = _DIVERGED_SCALE * max(model.size, 1.0)
+        self._loads = (_tree_actuation(model), _needs_body_loads(model))
+        with contextlib.ExitStack() as stack:
+            world = stack.enter_context(bullet_world(model, params, grid.dt))
+            self._exit = stack.pop_all()  # the world stays open until close()
+        self.uid, self.client = world.body, world.client
 
-def _check_times(dt: float, t_end: float, sample_times) -> np.ndarray:
-    """``sample_times`` as a float array, shape (n_samples,); a ValueError names a bad argument."""
-    if not (dt > 0 and math.isfinite(dt)):
-        raise ValueError(f"dt must be a positive finite number, got {dt!r}")
-    if not (t_end >= 0 and math.isfinite(t_end)):
-        raise ValueError(f"t_end must be a non-negative finite number, got {t_end!r}")
-    times = np.asarray(sample_times, dtype=float)
-    if times.ndim != 1 or np.any(np.diff(times) <= 0) or np.any(times < 0) \
-            or np.any(times > t_end + 0.5 * dt):
-        raise ValueError("sample_times must be increasing times in [0, t_end]")
-    return times
+    def _step_to(self, t: float) -> None:
+        actuation, needs_state = self._loads
+        while self.steps < self.grid.steps(t):
+            _apply_loads(self.model, self.uid, self.client, actuation, needs_state)
+            pybullet.stepSimulation(physicsClientId=self.client)
+            self.steps += 1
 
+    def _states(self, t: float) -> BodyStates:
+        return _read_states(self.model, self.uid, self.client)
 
-@dataclass
-class _Progress:
-    """What a run has reached: samples, steps taken and stepping wall time (s)."""
+    def divergence(self, states: BodyStates) -> str | None:
+        """A centre of mass beyond ``limit`` m from the origin, or a linear (m/s) or angular
+        (rad/s) speed beyond ``limit`` per second."""
+        for name, unit in (("position", "m"), ("velocity", "m/s"), ("angular_velocity", "rad/s")):
+            largest = float(np.max(np.linalg.norm(getattr(states, name), axis=1), initial=0.0))
+            if largest > self.limit:
+                return (f"{name.replace('_', ' ')} {largest:.3g} {unit} beyond "
+                        f"{_DIVERGED_SCALE:g} × the mechanism's size ({self.limit:g})")
+        return None
 
-    samples: list
-    step: int = 0
-    wall: float = 0.0
+    def counters(self) -> dict:
+        return {"substeps": self.steps * self.substeps}
 
-
-def _advance(model: PybulletModel, uid: int, client: int, loads: tuple, target: int,
-             progress: _Progress) -> None:
-    """Step until ``progress.step == target``, timing the loads and the stepping only."""
-    actuation, needs_state = loads
-    while progress.step < target:
-        start = time.perf_counter()
-        _apply_loads(model, uid, client, actuation, needs_state)
-        pybullet.stepSimulation(physicsClientId=client)
-        progress.wall += time.perf_counter() - start
-        progress.step += 1
-
-
-def _stepping(model: PybulletModel, uid: int, client: int, sample_steps: np.ndarray,
-              n_steps: int, progress: _Progress) -> str:
-    """Step through every sample and on to ``n_steps``; returns "ok" or "diverged"."""
-    loads = (_tree_actuation(model), _needs_body_loads(model))
-    limit = _DIVERGED_SCALE * max(model.size, 1.0)
-    for target in sample_steps:
-        _advance(model, uid, client, loads, int(target), progress)
-        states = _read_states(model, uid, client)
-        if _diverged(states, limit):
-            return "diverged"
-        progress.samples.append(states)
-    _advance(model, uid, client, loads, n_steps, progress)
-    return "ok"
-
-
-def _run(model: PybulletModel, params: dict, dt: float, sample_times: np.ndarray,
-         n_steps: int) -> Trajectory:
-    """Step a fresh world and sample it.
-
-    An exception raised by the engine ends the run as ``failed`` with the samples reached.
-    """
-    progress = _Progress(samples=[])
-    sample_steps = np.rint(sample_times / dt).astype(int)
-    reason = ""
-    try:
-        with bullet_world(model, params, dt) as world:
-            status = _stepping(model, world.body, world.client, sample_steps, n_steps, progress)
-    except Exception as error:  # an engine failure is data (DESIGN.md rule 5)
-        status, reason = "failed", f"{type(error).__name__}: {error}"
-    if status == "diverged":
-        reason = "state non-finite or a centre of mass beyond " \
-                 f"{_DIVERGED_SCALE * max(model.size, 1.0):g} m from the origin"
-    return Trajectory.from_samples(
-        sample_times, progress.samples, status=status, reason=reason,
-        failure_time=None if status == "ok" else progress.step * dt,
-        wall_time_s=progress.wall, steps=progress.step, notes=list(model.notes),
-        counters={"substeps": progress.step * max(1, int(params["numSubSteps"]))},
-    )
+    def close(self) -> None:
+        self._exit.close()
 
 
 class PybulletAdapter(Adapter):
@@ -149,8 +111,6 @@ class PybulletAdapter(Adapter):
     def build(self, mechanism: Mechanism) -> PybulletModel:
         return build_model(mechanism)
 
-    def simulate(self, model: PybulletModel, method: str, dt: float, t_end: float,
-                 sample_times: np.ndarray) -> Trajectory:
-        _, params = self.method_spec(method)
-        times = _check_times(dt, t_end, sample_times)
-        return _run(model, params, dt, times, int(round(t_end / dt)))
+    def _start(self, model: PybulletModel, spec: MethodSpec, params: dict,
+               grid: RunGrid) -> _BulletStepper:
+        return _BulletStepper(model, params, grid)
