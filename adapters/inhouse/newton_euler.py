@@ -3,7 +3,11 @@
 Velocities are the centre-of-mass velocity Ṙ and the angular velocity in body axes ω̄, six per
 body, so the mass matrix diag(m I, J̄) is constant and the quadratic-velocity term is the gyroscopic
 −ω̄ × J̄ω̄.  Positions stay (R, θ); θ is advanced on the unit sphere by the quaternion exponential
-θ ⊗ exp(h ω̄ / 2) (:meth:`advance`), so the normalisation equation is not needed.  The constraint
+θ ⊗ exp(Δπ̄ / 2) (:meth:`advance`), so the normalisation equation is not needed.  Rotations do not
+commute, so the explicit methods step in the exponential chart around the current orientation
+(:mod:`adapters.integrators.nystrom`, "Lie groups"): :meth:`increment_rate`,
+:meth:`chart_velocity` and :meth:`chart_acceleration` are the chart's maps of
+:mod:`adapters.integrators.so3` for the rotations and the identity for the translations.  The constraint
 Jacobian with respect to (Ṙ, ω̄) is Φ_q T with θ̇ = ¼ Ḡᵀ ω̄ (Ḡ of 002 eq. 28), and the
 acceleration right-hand side gains −Φ_θ ¼ Ḡ(θ̇)ᵀ ω̄ from differentiating that map.  Drift is held by
 Baumgarte terms (α, β; α = β = 0 gives the plain form).
@@ -18,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from adapters.inhouse.dynamics import g_bar, solve_augmented
 from adapters.inhouse.stabilisation import Formulation
+from adapters.integrators import so3
 
 
 class NewtonEuler(Formulation):
@@ -41,7 +46,7 @@ class NewtonEuler(Formulation):
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
         nb = len(mech.bodies)
-        self.rows = np.array([r for r in self.rows if r < self.constraints.n_joint_equations])
+        self.rows = self.rows[self.rows < self.constraints.n_joint_equations]
         self.n = 6 * nb
         self._mass = np.zeros((self.n, self.n))
         for b, body in enumerate(mech.bodies):
@@ -79,6 +84,26 @@ class NewtonEuler(Formulation):
             rotation = Rotation.from_quat(block[3:], scalar_first=True) * Rotation.from_rotvec(step[3:])
             block[3:] = rotation.as_quat(scalar_first=True, canonical=False)
         return out.ravel()
+
+    # -- the exponential chart of each body's rotation (Lie-group stepping) -------------------
+    def _chart(self, function, dq, *rates):
+        """Apply an :mod:`~adapters.integrators.so3` map to the rotation rows, identity elsewhere."""
+        out = np.array(rates[-1], dtype=float).reshape(-1, 6)
+        rotation = self._blocks(dq, 6)[:, 3:]
+        out[:, 3:] = function(rotation, *(self._blocks(r, 6)[:, 3:] for r in rates))
+        return out.ravel()
+
+    def increment_rate(self, q, dq, v):
+        """dexp⁻¹: (Ṙ, J(Δπ̄)⁻¹ ω̄) per body, shape (6 nb,)."""
+        return self._chart(so3.chart_rate, dq, v)
+
+    def chart_velocity(self, q, dq, w):
+        """dexp: (Ṙ, J(Δπ̄) w) per body, shape (6 nb,)."""
+        return self._chart(so3.angular_velocity, dq, w)
+
+    def chart_acceleration(self, q, dq, w, a):
+        """Second derivative of the increment: (R̈, J⁻¹(ω̄̇ − J̇ w)) per body, shape (6 nb,)."""
+        return self._chart(so3.chart_acceleration, dq, w, a)
 
     # -- the equations of motion (eq. 90–93) -------------------------------------------------
     def acceleration(self, t, q, v):

@@ -18,6 +18,17 @@ the length ``n`` of the velocity ``v``.  A position is then only ever changed th
 one-step methods (:mod:`.nystrom`) honour this; the multistep, implicit and SciPy methods combine
 positions linearly and require ``len(q) == len(v)`` (checked at construction).
 
+A problem whose group is not commutative (rotations in space) also provides, so that the explicit
+methods keep their order there (:mod:`.nystrom`, "Lie groups"):
+
+* ``increment_rate(q, dq, v) -> ndarray (n,)``: the rate k = dexp⁻¹_dq(v) at which the increment
+  dq must change for q ⊕ dq to move with velocity v (the inverse of the Jacobian of q ⊕ dq with
+  respect to dq, applied to v);
+* optionally ``chart_velocity(q, dq, w) -> ndarray (n,)``, the velocity of q ⊕ dq when dq moves
+  with rate w (dexp_dq(w)), and ``chart_acceleration(q, dq, w, a) -> ndarray (n,)``, the second
+  derivative of dq when moreover the velocity changes at rate a; Nyström tableaus of order > 1
+  that are not Runge–Kutta methods (rkn4) need them.
+
 Failures
 --------
 ``step()`` never raises for a numerical failure: a non-finite state or one whose norm exceeds

@@ -10,6 +10,30 @@ Every position change is ``problem.advance(q, dq)`` with ``dq`` h times a combin
 velocity and of h·accelerations — a tangent vector of shape (n,) — so these methods also integrate
 on a Lie group (``len(q) != len(v)``).
 
+Lie groups
+----------
+On a commutative group (the circle, a torus) q ⊕ dq composes exactly and the formulas above keep
+their order.  On a non-commutative one (rotations in space) the velocity v lives in the tangent
+space of the *moving* point, and composing stage velocities linearly drops a commutator term of
+order h³ (local): the global order falls to 2.  A problem on such a group provides
+``increment_rate`` (and, for Nyström tableaus of order > 2, ``chart_velocity`` and
+``chart_acceleration``; :mod:`.base`), and the step is taken in the exponential chart
+q(t) = q_n ⊕ Θ(t) around the current point, where Θ lives in a vector space:
+
+* Runge–Kutta tableaus (Euler, Heun, RK4): Runge–Kutta–Munthe-Kaas (H. Munthe-Kaas, *High order
+  Runge–Kutta methods on manifolds*, Appl. Numer. Math. 29, 1999; A. Iserles, H. Munthe-Kaas,
+  S. Nørsett, A. Zanna, *Lie-group methods*, Acta Numerica 9, 2000, §5.1).  The tableau is
+  applied to Θ̇ = dexp⁻¹_Θ(V), V̇ = a(t, q_n ⊕ Θ, V), Θ(0) = 0, with the exact dexp⁻¹
+  (:func:`munthe_kaas_step`); the classical order carries over.
+* Nyström tableaus (RKN4): the tableau is applied to the chart's own second-order equation
+  Θ̈ = F(t, Θ, Θ̇), F = dexp⁻¹_Θ(a − (d/dt dexp_Θ) Θ̇) (:func:`chart_nystrom_step`): an ODE in a
+  vector space, so the Nyström order conditions hold unchanged (the same re-centred chart that
+  RKMK uses, Iserles et al. §5.1, here with the second derivative).  RKN4 written as a
+  partitioned method with dexp⁻¹ only is not an option: its position tableau is implicit
+  (Â₂₂ = 1/4) and fails an order-4 condition (Σ b̂ Â (ĉ c) = 1/8, not 1/12) once the position
+  equation depends on Θ.
+* Symplectic Euler (order 1) keeps the plain composition, which is exact to O(h²) per step.
+
 A classical Runge–Kutta method (c, A, b) applied to the first-order system y = (q, v),
 f = (v, a) (seed 002 eq. 94) is the Nyström scheme with Ā = A·A and b̄ = b·A (substitute the
 velocity stages into the position stages), so Euler (eq. 98), Heun (eqs. 99–101) and RK4
@@ -19,6 +43,7 @@ velocity stages into the position stages), so Euler (eq. 98), Heun (eqs. 99–10
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -41,6 +66,9 @@ class NystromTableau:
         Velocity-update weights.
     bbar : ndarray, shape (s,)
         Position-update weights of the h² term.
+    runge_kutta : bool
+        True when the tableau is a Runge–Kutta method (c, A, b) in Nyström form (Ā = A·A,
+        b̄ = b·A), so that it has a Munthe-Kaas form on Lie groups.
     """
 
     c: np.ndarray
@@ -48,12 +76,13 @@ class NystromTableau:
     abar: np.ndarray
     b: np.ndarray
     bbar: np.ndarray
+    runge_kutta: bool = False
 
     @classmethod
     def from_runge_kutta(cls, c, a, b) -> NystromTableau:
         """The Nyström form of the Butcher tableau (c, A, b) applied to y = (q, v)."""
         c, a, b = (np.array(x, dtype=float) for x in (c, a, b))
-        return cls(c=c, a=a, abar=a @ a, b=b, bbar=b @ a)
+        return cls(c=c, a=a, abar=a @ a, b=b, bbar=b @ a, runge_kutta=True)
 
 
 def nystrom_step(acceleration, advance, t, q, v, h, tableau):
@@ -97,15 +126,94 @@ def nystrom_step(acceleration, advance, t, q, v, h, tableau):
     return advance(q, dq), v_new
 
 
+def munthe_kaas_step(acceleration, problem, t, q, v, h, tableau):
+    """One Runge–Kutta–Munthe-Kaas step of the Runge–Kutta tableau (c, A, b) (module docstring).
+
+    Stages Θ_i = h Σ_j A_ij k_j, V_i = v + h Σ_j A_ij a_j, a_i = a(t + c_i h, q ⊕ Θ_i, V_i) and
+    k_i = dexp⁻¹_{Θ_i}(V_i) (``problem.increment_rate``); q_{n+1} = q ⊕ h Σ b_i k_i,
+    v_{n+1} = v + h Σ b_i a_i.  Arguments and returns as :func:`nystrom_step` (``problem``
+    provides ``advance`` and ``increment_rate``); ``tableau.runge_kutta`` must be true.
+    """
+    rates, stages = [], []
+    for i, c_i in enumerate(tableau.c):
+        dq = np.zeros_like(v)
+        v_stage = v
+        for j, (k_j, a_j) in enumerate(zip(rates, stages)):
+            if tableau.a[i, j]:
+                dq = dq + (h * tableau.a[i, j]) * k_j
+                v_stage = v_stage + (h * tableau.a[i, j]) * a_j
+        stages.append(acceleration(t + c_i * h, problem.advance(q, dq), v_stage))
+        rates.append(problem.increment_rate(q, dq, v_stage))
+    dq = np.zeros_like(v)
+    v_new = v
+    for b_j, k_j, a_j in zip(tableau.b, rates, stages):
+        dq = dq + (h * b_j) * k_j
+        v_new = v_new + (h * b_j) * a_j
+    return problem.advance(q, dq), v_new
+
+
+def chart_nystrom_step(acceleration, problem, t, q, v, h, tableau):
+    """One step of a Nyström tableau on Θ̈ = F(t, Θ, Θ̇) in the exponential chart at q.
+
+    Stages Θ_i = c_i h v + h² Σ_j Ā_ij F_j, W_i = v + h Σ_j A_ij F_j (chart rates; W = v at Θ = 0),
+    V_i = dexp_{Θ_i}(W_i) (``problem.chart_velocity``), a_i = a(t + c_i h, q ⊕ Θ_i, V_i) and
+    F_i = ``problem.chart_acceleration(q, Θ_i, W_i, a_i)``; the update uses b̄ and b likewise and
+    maps the new chart rate back to a velocity.  Arguments and returns as :func:`nystrom_step`.
+    """
+    forces = []
+    for i, c_i in enumerate(tableau.c):
+        dq = (c_i * h) * v
+        w = v
+        for j, f_j in enumerate(forces):
+            if tableau.abar[i, j]:
+                dq = dq + (h * h * tableau.abar[i, j]) * f_j
+            if tableau.a[i, j]:
+                w = w + (h * tableau.a[i, j]) * f_j
+        a_i = acceleration(t + c_i * h, problem.advance(q, dq), problem.chart_velocity(q, dq, w))
+        forces.append(problem.chart_acceleration(q, dq, w, a_i))
+    dq = h * v
+    w = v
+    for bbar_j, b_j, f_j in zip(tableau.bbar, tableau.b, forces):
+        dq = dq + (h * h * bbar_j) * f_j
+        w = w + (h * b_j) * f_j
+    return problem.advance(q, dq), problem.chart_velocity(q, dq, w)
+
+
 class NystromIntegrator(Integrator):
-    """Fixed-step explicit one-step method defined by the class attribute ``tableau``."""
+    """Fixed-step explicit one-step method defined by the class attribute ``tableau``.
+
+    Picks the step rule once, at construction: :func:`nystrom_step` for a Euclidean or
+    commutative configuration space (no ``increment_rate`` on the problem) and for order ≤ 1,
+    :func:`munthe_kaas_step` for a Runge–Kutta tableau on a non-commutative group, else
+    :func:`chart_nystrom_step`, which needs the problem's ``chart_velocity`` and
+    ``chart_acceleration`` (a ValueError says so when they are missing).
+    """
 
     tableau: NystromTableau
 
+    def __init__(self, problem, t0, q0, v0, dt, **params):
+        super().__init__(problem, t0, q0, v0, dt, **params)
+        self._rule = self._step_rule()
+
+    def _step_rule(self):
+        problem = self.problem
+        commutative = not hasattr(problem, "increment_rate")
+        if commutative or (self.order <= 1 and not self.tableau.runge_kutta):
+            return partial(nystrom_step, self._acceleration, problem.advance)
+        if self.tableau.runge_kutta:
+            return partial(munthe_kaas_step, self._acceleration, problem)
+        missing = [name for name in ("chart_velocity", "chart_acceleration")
+                   if not hasattr(problem, name)]
+        if missing:
+            raise ValueError(f"method {self.name!r} on a non-commutative Lie group steps in the "
+                             f"exponential chart and needs the problem's {' and '.join(missing)}, "
+                             "which this problem does not provide; use a Runge–Kutta method "
+                             "(rk4, heun, euler), which needs only increment_rate")
+        return partial(chart_nystrom_step, self._acceleration, problem)
+
     def _step_impl(self):
         t_new = self._target_time()
-        q_new, v_new = nystrom_step(self._acceleration, self.problem.advance, self.t, self.q,
-                                    self.v, t_new - self.t, self.tableau)
+        q_new, v_new = self._rule(self.t, self.q, self.v, t_new - self.t, self.tableau)
         return t_new, q_new, v_new
 
 
@@ -169,6 +277,6 @@ class RKN4(NystromIntegrator):
     name = "rkn4"
     order = 4
     tableau = replace(
-        RK4.tableau,
+        RK4.tableau, runge_kutta=False,
         abar=np.array([[0.0, 0.0, 0.0, 0.0], [0.125, 0.0, 0.0, 0.0], [0.125, 0.0, 0.0, 0.0],
                        [0.0, 0.0, 0.5, 0.0]]))

@@ -3,7 +3,8 @@
 :class:`ConstrainedProblem` implements the protocol of :mod:`adapters.integrators`:
 ``acceleration`` calls ``pin.constraintDynamics`` (tree dynamics with the loop closures, solved by
 Pinocchio's proximal method with its Baumgarte corrector), ``advance`` is ``pin.integrate`` (the
-configuration stays on its manifold), and ``project`` optionally pulls the state back onto the
+configuration stays on its manifold; :mod:`.stepping` adds the dexp⁻¹ map for trees with
+non-commutative joints), and ``project`` optionally pulls the state back onto the
 loop-closure manifold (seed 002 eq. 137: Gauss–Newton on the cut-joint residuals with Pinocchio's
 constraint Jacobian, then a least-squares velocity projection).
 """
