@@ -94,6 +94,32 @@ class SpanningTree:
     flipped: dict[str, bool]
     redundant_closure_equations: int
 
+    def depth_first_order(self) -> tuple[str, ...]:
+        """Bodies in depth-first pre-order from ground, siblings in name order.
+
+        Every subtree is one contiguous run of this sequence, the numbering that recursive
+        multibody algorithms index their subtrees by (Featherstone's λ(i) < i with contiguous
+        subtrees, as Pinocchio's ``nvSubtree`` and Bullet's link re-sorting assume).
+
+        Returns
+        -------
+        tuple of str
+            Body names, each parent before its children and each subtree contiguous; the same
+            sequence whatever the order in which the scenario declares its bodies.
+        """
+        children: dict[str, list[str]] = {GROUND: []}
+        for body in sorted(self.bodies):
+            children.setdefault(body, [])
+            children.setdefault(self.parent[body], []).append(body)
+        ordered: list[str] = []
+        pending = [GROUND]
+        while pending:
+            vertex = pending.pop()
+            if vertex != GROUND:
+                ordered.append(vertex)
+            pending.extend(reversed(children[vertex]))
+        return tuple(ordered)
+
     def path_matrix(self) -> np.ndarray:
         """The path matrix P, signed as in the module docstring.
 
@@ -239,7 +265,9 @@ def spanning_tree(mech: Mechanism, closure_equations: Callable[[Joint], int]) ->
 
     1. the closure cost Σ ``closure_equations(joint)`` over the cut joints,
     2. the largest number of tree joints between a body and ground,
-    3. the declaration positions of the cut joints, compared lexicographically.
+    3. the names of the cut joints, sorted and compared lexicographically,
+
+    so the choice never depends on the order in which the scenario declares its joints.
 
     Parameters
     ----------
@@ -271,7 +299,8 @@ def spanning_tree(mech: Mechanism, closure_equations: Callable[[Joint], int]) ->
         if reached is None:
             continue
         parent = _parents(reached)
-        key = (sum(costs[i] for i in cut), max(_depths(parent).values(), default=0), cut)
+        key = (sum(costs[i] for i in cut), max(_depths(parent).values(), default=0),
+               sorted(mech.joints[i].name for i in cut))
         if best_key is None or key < best_key:
             best_key, best = key, (cut, reached, parent)
     cut, reached, parent = best

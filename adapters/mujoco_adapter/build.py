@@ -37,6 +37,9 @@ from adapters.mujoco_adapter.loads import _loads, _Loads
 from harness.model import GROUND, Joint, Mechanism, SpringDamper
 from harness.topology import SpanningTree, spanning_tree
 
+#: Smallest principal moment MuJoCo is given, relative to the body's largest (MuJoCo refuses a
+#: non-positive one; a slender bar has a zero moment about its own axis).
+INERTIA_FLOOR = 1e-9
 #: Cut-joint closure cost when MuJoCo cannot close the joint at all (never preferred).
 UNCLOSABLE = 1000
 _SLIDING = ("prismatic", "translational")
@@ -77,8 +80,10 @@ class MujocoModel:
     model : mujoco.MjModel
         The compiled model at MuJoCo's defaults; :meth:`MujocoAdapter.simulate` works on a copy.
     body_ids : ndarray of int, shape (n_bodies,)
-        MuJoCo body id of each mechanism body (declaration order).
+        MuJoCo body id of each mechanism body (declaration order), read back by name.
     loads : _Loads
+    notes : tuple of str
+        Facts about the translation a reader of a case must know (raised inertias).
     """
 
     mechanism: Mechanism
@@ -87,6 +92,7 @@ class MujocoModel:
     model: mujoco.MjModel
     body_ids: np.ndarray
     loads: _Loads
+    notes: tuple[str, ...] = ()
 
 
 # --------------------------------------------------------------------------------------------
@@ -125,11 +131,45 @@ def _elementary_joints(joint: Joint, flipped: bool, parent_to_child: np.ndarray)
     return [("", mujoco.mjtJoint.mjJNT_BALL, _Z)]
 
 
+def floored_inertia(inertia: np.ndarray) -> tuple[np.ndarray, float]:
+    """``inertia`` with every principal moment raised to at least :data:`INERTIA_FLOOR` times
+    the largest, and the floor (kg·m²); unchanged when no moment is below it.
+
+    Parameters
+    ----------
+    inertia : ndarray, shape (3, 3)
+        Centroidal inertia tensor, kg·m².
+
+    Returns
+    -------
+    inertia : ndarray, shape (3, 3)
+    floor : float
+    """
+    moments, axes = np.linalg.eigh(inertia)
+    floor = INERTIA_FLOOR * float(moments[-1])
+    if moments[0] >= floor:
+        return inertia, floor
+    return axes @ np.diag(np.maximum(moments, floor)) @ axes.T, floor
+
+
+def _inertia_notes(mech: Mechanism) -> tuple[str, ...]:
+    """One note per body whose inertia :func:`floored_inertia` raised."""
+    notes = []
+    for body in mech.bodies:
+        smallest = float(np.linalg.eigvalsh(body.inertia)[0])
+        raised, floor = floored_inertia(body.inertia)
+        if raised is not body.inertia:
+            notes.append(f"body {body.name}: principal moment {smallest:.3g} raised to {floor:.3g} "
+                         f"kg·m² ({INERTIA_FLOOR:g} × its largest) for MuJoCo, which requires "
+                         "positive inertia")
+    return tuple(notes)
+
+
 def _add_body(spec_parent, mech: Mechanism, name: str, parent: str):
     """Add body ``name`` under ``spec_parent`` at its reference pose relative to ``parent``."""
     rot_p, pos_p = _pose(mech, parent)
     body = mech.bodies[mech.body_index(name)]
-    inertia = body.inertia
+    inertia, _ = floored_inertia(np.asarray(body.inertia, dtype=float))
     added = spec_parent.add_body(name=name, pos=rot_p.T @ (body.position - pos_p),
                                  quat=_quat(rot_p.T @ body.rotation))
     added.mass = body.mass
@@ -195,7 +235,7 @@ def _make_spec(mech: Mechanism, tree: SpanningTree) -> mujoco.MjSpec:
     spec.option.gravity = np.asarray(mech.gravity, dtype=float)
     spec.option.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
     bodies = {GROUND: spec.worldbody}
-    for name in tree.order:
+    for name in tree.depth_first_order():
         parent = tree.parent[name]
         bodies[name] = _add_body(bodies[parent], mech, name, parent)
         joint = mech.joint(tree.parent_joint[name])
@@ -214,4 +254,5 @@ def build_model(mechanism: Mechanism) -> MujocoModel:
     spec = _make_spec(mechanism, tree)
     model = spec.compile()
     body_ids = np.array([model.body(body.name).id for body in mechanism.bodies])
-    return MujocoModel(mechanism, tree, spec, model, body_ids, _loads(mechanism, tree, model))
+    return MujocoModel(mechanism, tree, spec, model, body_ids, _loads(mechanism, tree, model),
+                       _inertia_notes(mechanism))

@@ -121,7 +121,9 @@ def build_model(mech: Mechanism) -> PinocchioModel:
     model.name = mech.name
     model.gravity = pin.Motion(np.asarray(mech.gravity, dtype=float), np.zeros(3))
     joint_ids = {}
-    for body_name in tree.order:
+    # Depth-first: Pinocchio's algorithms (crba's nvSubtree ranges) need every subtree's
+    # velocity indices contiguous; breadth-first numbering breaks crba and constraintDynamics.
+    for body_name in tree.depth_first_order():
         joint_ids[tree.parent_joint[body_name]] = _add_body(model, mech, tree, body_name, joint_ids)
     body_frames = tuple(model.getFrameId(body.name) for body in mech.bodies)
     constraints = tuple(c for name in tree.cut_joints

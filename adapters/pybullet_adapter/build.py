@@ -97,7 +97,10 @@ class PybulletModel:
     mechanism : Mechanism
     tree : SpanningTree
     links : tuple of _Link
-        Bullet links in creation order (parents first).
+        Bullet links in creation order: depth-first pre-order, the order ``createMultiBody``
+        re-sorts its links into, so a link's index here is its Bullet link index (checked by
+        :func:`~adapters.pybullet_adapter.world.bullet_world` against the link names it reads
+        back).
     body_links : tuple of int
         Bullet link index of each body (declaration order).
     principal : ndarray, shape (n_bodies, 3, 3)
@@ -179,7 +182,7 @@ def _layout(mech: Mechanism, tree: SpanningTree) -> tuple[list[_Link], list[int]
     body_links = [0] * len(mech.bodies)
     tree_joints = []
     origins = {-1: np.zeros(3)}
-    for name in tree.order:
+    for name in tree.depth_first_order():
         child = mech.body_index(name)
         parent = mech.body_index(tree.parent[name])
         joint = mech.joint(tree.parent_joint[name])

@@ -12,6 +12,7 @@ explicitly (links without a collision shape otherwise get zero inertia).
 from __future__ import annotations
 
 import contextlib
+import itertools
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -53,6 +54,35 @@ def _create_multibody(model: PybulletModel, client: int) -> int:
         linkJointAxis=[list(l.axis) for l in links],
         physicsClientId=client,
     )
+
+
+class LinkOrderError(RuntimeError):
+    """Bullet's link indices are not the model's link indices (the model would read wrong links)."""
+
+
+def _check_link_order(model: PybulletModel, uid: int, client: int) -> None:
+    """Read every link's name back from Bullet and require link ``i`` to be created link ``i``.
+
+    ``createMultiBody`` names the link created at position ``k`` (0-based) ``link{k + 1}`` and
+    re-sorts links depth-first; :func:`~adapters.pybullet_adapter.build.build_model` creates them
+    in that order, so the read-back names must run ``link1, link2, …``.
+
+    Raises
+    ------
+    LinkOrderError
+        Naming the first Bullet link that holds a different created link.
+    """
+    count = pybullet.getNumJoints(uid, physicsClientId=client)
+    names = [pybullet.getJointInfo(uid, index, physicsClientId=client)[12].decode()
+             for index in range(count)]
+    expected = [f"link{index + 1}" for index in range(len(model.links))]
+    wrong = [(index, name, want) for index, (name, want)
+             in enumerate(itertools.zip_longest(names, expected)) if name != want]
+    if wrong:
+        index, name, want = wrong[0]
+        raise LinkOrderError(f"Bullet link {index} is {name!r}, expected {want!r}: Bullet "
+                             "re-sorted the links, so states would be written to and read from "
+                             "the wrong bodies")
 
 
 def _make_faithful(model: PybulletModel, uid: int, client: int) -> None:
@@ -151,6 +181,7 @@ def bullet_world(model: PybulletModel, params: dict | None, dt: float) -> Iterat
         else:
             _set_parameters(params, dt, model.mechanism.gravity, client)
         uid = _create_multibody(model, client)
+        _check_link_order(model, uid, client)
         _make_faithful(model, uid, client)
         constraints = _add_cut_constraints(model, uid, client)
         _reset_state(model, uid, initial_state(model.mechanism), client)

@@ -1,0 +1,217 @@
+"""The neutral model's accelerations at a consistent state: Newton–Euler in body twists with the
+joint equations of :mod:`harness.joint_equations` as index-1 constraints.
+
+Equations (seed 002 §3: Newton–Euler equations with Lagrange multipliers; seed 000 eq. 1.62 for the
+acceleration-level constraint)
+----------------------------------------------------------------------------------------------
+With every body's twist ν_b = [v_b, ω_b] (centre-of-mass velocity and angular velocity, world
+axes), mass matrix M = diag(m_b I₃, J_b) with J_b = A_b J̄_b A_bᵀ the world inertia, applied
+wrench Q (forces at the centres of mass and torques about them) and the joint equations'
+Jacobian G = ∂Φ̇/∂ν:
+
+    M ν̇ + Gᵀ λ = Q − [0; ω × J ω]        (Newton–Euler with constraint reactions)
+    G ν̇ = γ,   γ = −Ġ ν                  (second derivative of the joint equations)
+
+solved together as one KKT system by least squares, so redundant joint equations (a planar
+revolute loop closed in space, the N-four-bar's parallelogram) are handled: ν̇ is unique whenever
+M is positive definite on the null space of G, the multipliers need not be.  Ġ ν is the central
+difference of :meth:`~harness.joint_equations.JointEquations.velocity_residuals` along the motion
+at fixed twists (positions advanced by v·h, orientations by the rotation ω·h).
+
+Planar mechanisms use the planar twists [v_x, v_y, ω_z] of the joint equations, with the inertia
+about z; their gyroscopic term vanishes (z is a principal axis of a planar body).
+
+Loads: gravity m g on every body; :class:`~harness.model.BodyForce` at its point;
+:class:`~harness.model.BodyTorque`; :class:`~harness.model.JointActuation` as a torque (revolute,
+cylindrical) or a force at the joint points (prismatic, translational) along each body's own world
+axis, +value on ``body2`` and −value on ``body1``; :class:`~harness.model.SpringDamper` as the
+tension k (L − L₀) + c L̇ along the line between its points.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from scipy.spatial.transform import Rotation
+
+from harness.joint_equations import JointEquations, rotation_matrices
+from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from harness.trajectory import BodyStates
+
+#: Time step (s) of the central difference that gives Ġ ν: truncation O(h²) ≈ 1e-10 relative,
+#: round-off ≈ 1e-16 / h ≈ 1e-11 relative, for rates of order 1 rad/s.
+DIFFERENCE_STEP = 1e-5
+_TORQUE_JOINTS = ("revolute", "cylindrical")
+
+
+@dataclass(frozen=True)
+class Accelerations:
+    """Body accelerations at one instant.
+
+    Attributes
+    ----------
+    linear : ndarray, shape (n_bodies, 3)
+        Centre-of-mass accelerations, m/s², world frame.
+    angular : ndarray, shape (n_bodies, 3)
+        Angular accelerations, rad/s², world axes.
+    """
+
+    linear: np.ndarray
+    angular: np.ndarray
+
+
+def _point_state(states: BodyStates, rotations: np.ndarray, body: int, local: np.ndarray):
+    """World arm from the centre of mass (m), position (m) and velocity (m/s) of a body point;
+    ground (−1) is the world frame at rest."""
+    local = np.asarray(local, dtype=float)
+    if body < 0:
+        return np.zeros(3), local, np.zeros(3)
+    arm = rotations[body] @ local
+    return (arm, states.position[body] + arm,
+            states.velocity[body] + np.cross(states.angular_velocity[body], arm))
+
+
+def applied_wrenches(mech: Mechanism, states: BodyStates) -> np.ndarray:
+    """World force and torque about the centre of mass on every body, shape (n_bodies, 2, 3).
+
+    Gravity and every load of ``mech.forces`` (see the module docstring); N and N·m.
+    """
+    rotations = rotation_matrices(states.quaternion)
+    wrench = np.zeros((len(mech.bodies) + 1, 2, 3))  # last row: ground, discarded
+
+    def push(body: int, force: np.ndarray, arm: np.ndarray, torque=np.zeros(3)) -> None:
+        wrench[body, 0] += force
+        wrench[body, 1] += np.cross(arm, force) + torque
+
+    for index, body in enumerate(mech.bodies):
+        wrench[index, 0] += body.mass * np.asarray(mech.gravity, dtype=float)
+    for load in mech.forces:
+        if isinstance(load, BodyForce):
+            index = mech.body_index(load.body)
+            push(index, np.asarray(load.force, dtype=float),
+                 _point_state(states, rotations, index, load.point)[0])
+        elif isinstance(load, BodyTorque):
+            wrench[mech.body_index(load.body), 1] += load.torque
+        elif isinstance(load, JointActuation):
+            joint = mech.joint(load.joint)
+            sides = ((joint.body2, joint.point2, joint.axis2, load.value),
+                     (joint.body1, joint.point1, joint.axis1, -load.value))
+            for name, point, axis, value in sides:
+                index = mech.body_index(name)
+                world_axis = axis if index < 0 else rotations[index] @ axis
+                if joint.type in _TORQUE_JOINTS:
+                    wrench[index, 1] += value * world_axis
+                else:
+                    push(index, value * world_axis,
+                         _point_state(states, rotations, index, point)[0])
+        elif isinstance(load, SpringDamper):
+            one, two = mech.body_index(load.body1), mech.body_index(load.body2)
+            arm1, at1, velocity1 = _point_state(states, rotations, one, load.point1)
+            arm2, at2, velocity2 = _point_state(states, rotations, two, load.point2)
+            length = float(np.linalg.norm(at2 - at1))
+            direction = (at2 - at1) / length
+            tension = (load.stiffness * (length - load.free_length)
+                       + load.damping * float(direction @ (velocity2 - velocity1)))
+            push(one, tension * direction, arm1)
+            push(two, -tension * direction, arm2)
+        else:
+            raise TypeError(f"load {load!r}: unknown load type {type(load).__name__}")
+    return wrench[:-1]
+
+
+def _world_inertias(mech: Mechanism, rotations: np.ndarray) -> np.ndarray:
+    """World inertia tensors A J̄ Aᵀ, shape (n_bodies, 3, 3), kg·m²."""
+    local = np.array([body.inertia for body in mech.bodies], dtype=float)
+    return np.einsum("bij,bjk,blk->bil", rotations, local, rotations)
+
+
+def _moved(states: BodyStates, h: float) -> BodyStates:
+    """``states`` advanced by h along the motion at fixed twists (rotation ω·h in world axes)."""
+    turn = Rotation.from_rotvec(h * states.angular_velocity)
+    rotation = turn * Rotation.from_quat(states.quaternion, scalar_first=True)
+    return BodyStates(states.position + h * states.velocity,
+                      rotation.as_quat(scalar_first=True), states.velocity,
+                      states.angular_velocity)
+
+
+def _gamma(equations: JointEquations, states: BodyStates) -> np.ndarray:
+    """γ = −Ġ ν, shape (m,), by a central difference of the velocity residuals."""
+    ahead, behind = (_moved(states, sign * DIFFERENCE_STEP) for sign in (1.0, -1.0))
+    rates = [equations.velocity_residuals(s.position, s.quaternion, s.velocity,
+                                          s.angular_velocity) for s in (ahead, behind)]
+    return -(rates[0] - rates[1]) / (2.0 * DIFFERENCE_STEP)
+
+
+def accelerations(mech: Mechanism, states: BodyStates) -> Accelerations:
+    """Body accelerations of ``mech`` at the consistent state ``states`` (index-1 KKT solve).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    states : BodyStates
+        Positions, orientations and velocities satisfying the joint equations (their velocity
+        residuals are assumed zero; the driver is free, not prescribed).
+
+    Returns
+    -------
+    Accelerations
+        Planar mechanisms have zero z acceleration and zero x, y angular acceleration.
+    """
+    rotations = rotation_matrices(states.quaternion)
+    inertia = _world_inertias(mech, rotations)
+    wrench = applied_wrenches(mech, states)
+    omega = np.asarray(states.angular_velocity, dtype=float)
+    wrench[:, 1] -= np.cross(omega, np.einsum("bij,bj->bi", inertia, omega))
+    equations = JointEquations(mech)
+    jacobian = equations.jacobian(states.position, states.quaternion)
+    masses = mech.masses
+    if mech.planar:
+        blocks = [np.diag([m, m, j[2, 2]]) for m, j in zip(masses, inertia)]
+        rhs = wrench.reshape(-1, 6)[:, [0, 1, 5]].ravel()
+    else:
+        blocks = [scipy.linalg.block_diag(m * np.eye(3), j) for m, j in zip(masses, inertia)]
+        rhs = wrench.reshape(-1).copy()
+    mass = scipy.linalg.block_diag(*blocks)
+    n, m = mass.shape[0], jacobian.shape[0]
+    kkt = np.block([[mass, jacobian.T], [jacobian, np.zeros((m, m))]])
+    solution = scipy.linalg.lstsq(kkt, np.concatenate([rhs, _gamma(equations, states)]),
+                                  lapack_driver="gelsd")[0]
+    twist_rates = solution[:n].reshape(len(mech.bodies), -1)
+    if mech.planar:
+        zeros = np.zeros(len(mech.bodies))
+        return Accelerations(np.column_stack([twist_rates[:, :2], zeros]),
+                             np.column_stack([zeros, zeros, twist_rates[:, 2]]))
+    return Accelerations(twist_rates[:, :3].copy(), twist_rates[:, 3:].copy())
+
+
+def start_accelerations(times: np.ndarray, velocity: np.ndarray,
+                        angular_velocity: np.ndarray) -> Accelerations:
+    """Accelerations at the first of three equally spaced samples, from their velocities.
+
+    The one-sided second-order difference a(0) ≈ (−3 v(0) + 4 v(T) − v(2T)) / (2T), error
+    O(T²) times the third derivative of the velocity.
+
+    Parameters
+    ----------
+    times : ndarray, shape (3,)
+        0, T, 2T (s).
+    velocity, angular_velocity : ndarray, shape (3, n_bodies, 3)
+        Sampled centre-of-mass velocities (m/s) and angular velocities (rad/s, world axes).
+
+    Raises
+    ------
+    ValueError
+        If ``times`` are not three equally spaced increasing samples.
+    """
+    times = np.asarray(times, dtype=float)
+    span = times[1] - times[0] if times.shape == (3,) else 0.0
+    if not (span > 0 and abs(times[2] - times[1] - span) <= 1e-9 * span):
+        raise ValueError(f"times must be three equally spaced increasing samples, got {times}")
+
+    def rate(samples) -> np.ndarray:
+        first, second, third = np.asarray(samples, dtype=float)
+        return (-3.0 * first + 4.0 * second - third) / (2.0 * span)
+
+    return Accelerations(rate(velocity), rate(angular_velocity))
