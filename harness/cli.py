@@ -1,17 +1,32 @@
 """The ``mbh`` command line.
 
-Every user error (bad scenario file, unknown method, a mechanism that cannot be assembled) prints
-one clear message per problem on stderr and exits with status 2; it never shows a traceback.
+Every user error (bad scenario file, unknown method, a step that does not fit the sample grid, a
+mechanism that cannot be assembled) prints one clear message per problem on stderr and exits with
+status 2; it never shows a traceback.
+
+``--json`` output is strict JSON (RFC 8259), whatever the numbers: a non-finite value is written as
+one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (:mod:`harness.jsonout`), and what
+an engine library prints while a case runs is captured at the file-descriptor level and kept in
+the case's ``notes``, never on stdout (:mod:`harness.capture`).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 
-from harness import scenario
+from harness import jsonout, scenario
 from harness.scenario import ScenarioError
+from harness.verdict import Bounds
+
+#: Most steps ``mbh simulate`` will attempt (a run longer than this is an input error).
+MAX_STEPS = 1e8
+BOUNDS_HELP = ("the verdict's bounds as NAME=VALUE,...: gap (joint gap / mechanism size, default "
+               "%(gap)g), orientation (rad, %(orientation)g), energy (energy error / energy scale, "
+               "%(energy)g), branch (distance from the reference's branch / mechanism size, "
+               "%(branch)g); see harness/verdict.py" % vars(Bounds()))
+JSON_HELP = ('strict JSON on stdout; non-finite numbers as the strings "NaN", "Infinity", '
+             '"-Infinity"')
 
 
 class UserError(Exception):
@@ -23,6 +38,10 @@ def _load(name: str):
         return scenario.load(name)
     except ScenarioError as error:
         raise UserError(str(error)) from None
+
+
+def _print_json(value) -> None:
+    print(jsonout.dumps(value))
 
 
 def _print_table(rows: list[dict], columns: list[str]) -> None:
@@ -40,7 +59,7 @@ def cmd_scenarios(args) -> int:
                      "joints": ", ".join(f"{j.name}:{j.type}" for j in mech.joints),
                      "tags": ", ".join(mech.tags)})
     if args.json:
-        print(json.dumps(rows, indent=2))
+        _print_json(rows)
     else:
         _print_table(rows, ["name", "kind", "bodies", "joints", "tags"])
     return 0
@@ -53,19 +72,37 @@ def _names(args) -> list[str]:
 
 
 def cmd_check(args) -> int:
-    from adapters.inhouse.kinematics import AssemblyError, check
+    """Kinematic analysis by the harness's neutral kinematics (:mod:`harness.assembly`,
+    :mod:`harness.rank`): assembly residuals, rank, mobility, redundant equations, singularity.
 
+    ``n_coordinates`` counts twist coordinates (6 per spatial body, 3 per planar body) and
+    ``n_equations`` the joint rows (no driver, no normalisation rows).  A start at a singular
+    configuration (condition number above :data:`harness.rank.CONDITION_LIMIT`, or rank lost) is
+    refused: its entry has the ``error`` and, with the rank analysis there, a ``warning``.
+    """
+    from harness.assembly import AssemblyError, assemble
+
+    mechanisms = [_load(name) for name in _names(args)]  # a bad file: exit 2 before any output
     results, failed = [], False
-    for name in _names(args):
+    for mech in mechanisms:
+        head = {"scenario": mech.name, "kind": mech.kind, "n_bodies": len(mech.bodies)}
         try:
-            results.append(check(_load(name)))
-        except (AssemblyError, UserError) as error:
+            assembly = assemble(mech)
+        except AssemblyError as error:
             failed = True
-            results.append({"scenario": name, "error": str(error)})
+            report = getattr(error, "report", None)
+            results.append({"scenario": mech.name, "error": str(error)}
+                           | ({} if report is None else report.fields()))
+            continue
+        results.append(head | assembly.report.fields() | {
+            "assembly_residual": assembly.residual, "assembly_iterations": assembly.iterations,
+            "velocity_residual": assembly.velocity_residual})
     if args.json:
-        print(json.dumps(results, indent=2))
+        _print_json(results)
     else:
         for result in results:
+            if "warning" in result:
+                print(f"mbh: warning: {result['scenario']}: {result['warning']}", file=sys.stderr)
             print(f"== {result['scenario']}")
             for key, value in result.items():
                 if key != "scenario":
@@ -78,7 +115,7 @@ def cmd_methods(args) -> int:
     rows = [{"method": spec.name, "parameters": ", ".join(f"{k}={v}" for k, v in spec.params.items()),
              "description": spec.description} for spec in adapter.methods()]
     if args.json:
-        print(json.dumps(rows, indent=2))
+        _print_json(rows)
     else:
         print(f"{adapter.version()}: {len(rows)} methods")
         _print_table(rows, ["method", "parameters", "description"])
@@ -94,62 +131,59 @@ def _adapter(name: str):
         raise UserError(str(error)) from None
 
 
+def _bounds(text: str | None) -> Bounds:
+    try:
+        return Bounds.parse(text or "")
+    except ValueError as error:
+        raise UserError(f"--bounds: {error}") from None
+
+
 def cmd_simulate(args) -> int:
-    from harness.metrics import case_metrics
+    from harness.case import run_case
     from harness.reference import ReferenceError, reference_trajectory
-    from harness.sampling import sample_times
 
     mech = _load(args.name)
     adapter = _adapter(args.adapter)
+    bounds = _bounds(args.bounds)
     t_end = mech.duration if args.t_end is None else args.t_end
     if not 0 < t_end <= mech.duration:
         raise UserError(f"--t-end must be in (0, {mech.duration:g}] s, got {t_end:g}")
-    if args.dt <= 0:
+    if not args.dt > 0:
         raise UserError(f"--dt must be > 0, got {args.dt:g}")
+    if t_end / args.dt > MAX_STEPS:
+        raise UserError(f"--dt {args.dt:g} s would take {t_end / args.dt:.3g} steps to "
+                        f"{t_end:g} s (at most {MAX_STEPS:.0e}); give a larger step")
     try:
         adapter.method_spec(args.method)
     except ValueError as error:
         raise UserError(str(error)) from None
-    times = sample_times(args.dt, t_end)
-    trajectory = _run_case(adapter, mech, args.method, args.dt, t_end, times)
     reference = None
     if not args.no_reference:
         try:
             reference = reference_trajectory(mech)
         except ReferenceError as error:
             print(f"mbh: no reference: {error}", file=sys.stderr)
+    try:
+        case = run_case(adapter, mech, args.method, args.dt, t_end, reference, bounds)
+    except ValueError as error:  # a step or end time the sample grid or the adapter refuses
+        raise UserError(f"--dt {args.dt:g}, --t-end {t_end:g}: {error}") from None
     result = {"scenario": mech.name, "adapter": adapter.name, "version": adapter.version(),
-              "method": args.method, "dt": args.dt, "t_end": t_end,
-              **case_metrics(mech, trajectory, reference)}
+              "method": args.method, "dt": args.dt, "t_end": t_end, **case.metrics}
     if args.json:
-        print(json.dumps(result, indent=2))
+        _print_json(result)
     else:
         for key, value in result.items():
             print(f"{key:28s} {value}")
     return 0
 
 
-def _run_case(adapter, mech, method, dt, t_end, times):
-    """Build and simulate one case; an engine that cannot build it gives an unsupported row."""
-    from adapters.base import UnsupportedCase
-    from harness.trajectory import Trajectory
-
-    try:
-        model = adapter.build(mech)
-    except UnsupportedCase as error:
-        return Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
-    return adapter.simulate(model, method, dt, t_end, times)
-
-
 def cmd_export(args) -> int:
     mech = _load(args.name)
-    if args.adapter != "mujoco":
-        raise UserError(f"export is available for the mujoco adapter, not {args.adapter!r}")
+    adapter = _adapter(args.adapter)
     from adapters.base import UnsupportedCase
-    from adapters.mujoco_adapter import export_mjcf
 
     try:
-        text = export_mjcf(mech)
+        text = adapter.export(mech)
     except UnsupportedCase as error:
         raise UserError(f"{mech.name}: {error}") from None
     if args.output:
@@ -163,8 +197,11 @@ def cmd_export(args) -> int:
 def cmd_seed_table(args) -> int:
     from harness.seedtable import format_rows, seed_rows
 
-    rows = seed_rows(repeats=args.repeats)
-    print(json.dumps(rows, indent=2) if args.json else format_rows(rows))
+    rows = seed_rows(repeats=args.repeats, bounds=_bounds(args.bounds))
+    if args.json:
+        _print_json(rows)
+    else:
+        print(format_rows(rows))
     return 0
 
 
@@ -173,18 +210,18 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("scenarios", help="list the shipped scenarios")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_scenarios)
 
     p = sub.add_parser("check", help="kinematic analysis: assembly, rank, mobility, redundancy")
     p.add_argument("name", nargs="?")
     p.add_argument("--all", action="store_true")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_check)
 
     p = sub.add_parser("methods", help="list an adapter's methods with their parameters")
     p.add_argument("--adapter", default="inhouse")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_methods)
 
     p = sub.add_parser("simulate", help="run one case and measure it against the reference")
@@ -194,12 +231,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--dt", type=float, required=True, help="step size, s")
     p.add_argument("--t-end", type=float, default=None, help="end time, s (default: duration)")
     p.add_argument("--no-reference", action="store_true", help="skip the reference comparison")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--bounds", default=None, help=BOUNDS_HELP)
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_simulate)
 
     p = sub.add_parser("seed-table", help="the seed's comparison table (Rouvinen 2003, ch. 7 setup)")
     p.add_argument("--repeats", type=int, default=3, help="runs per case for the mean wall time")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--bounds", default=None, help=BOUNDS_HELP)
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_seed_table)
 
     p = sub.add_parser("export", help="write the engine model an adapter generates (MJCF)")

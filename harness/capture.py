@@ -1,0 +1,83 @@
+"""Capture what engine libraries print, at the file-descriptor level.
+
+C libraries (SUNDIALS, Bullet, MuJoCo) write with ``printf``/``fprintf`` straight to file
+descriptors 1 and 2, past Python's ``sys.stdout``, so ``contextlib.redirect_stdout`` does not
+catch them.  :func:`captured_output` points both descriptors at a temporary file for the duration
+of a block (``os.dup``/``os.dup2``), flushing Python's and C's stdio buffers on the way in and out
+so that nothing printed inside lands outside, and hands back the text.  The redirection is
+process-wide: do not run two captured blocks in threads of one process at once.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import sys
+import tempfile
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+#: Longest engine message kept in a case's notes, characters.
+NOTE_LIMIT = 2000
+_DESCRIPTORS = (1, 2)
+
+
+@dataclass
+class Captured:
+    """What was printed inside a :func:`captured_output` block (set when the block ends)."""
+
+    text: str = ""
+
+
+def _flush_c_stdio() -> None:
+    """fflush(NULL): push C stdio buffers out before a descriptor is switched."""
+    try:
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no C runtime reachable this way (not POSIX)
+        pass
+
+
+def _flush_all() -> None:
+    for stream in (sys.stdout, sys.stderr):
+        if stream is not None:
+            stream.flush()
+    _flush_c_stdio()
+
+
+@contextmanager
+def captured_output():
+    """Redirect file descriptors 1 and 2 into a temporary file inside the block.
+
+    Yields
+    ------
+    Captured
+        Its ``text`` holds everything written to either descriptor (decoded as UTF-8, bad bytes
+        replaced) once the block has ended, also when it ended with an exception.
+    """
+    captured = Captured()
+    _flush_all()
+    with tempfile.TemporaryFile() as sink:
+        saved = [(fd, os.dup(fd)) for fd in _DESCRIPTORS]
+        try:
+            for fd in _DESCRIPTORS:
+                os.dup2(sink.fileno(), fd)
+            yield captured
+        finally:
+            _flush_all()
+            for fd, copy in saved:
+                os.dup2(copy, fd)
+                os.close(copy)
+            sink.seek(0)
+            captured.text = sink.read().decode("utf-8", errors="replace")
+
+
+def engine_note(text: str, limit: int = NOTE_LIMIT) -> str | None:
+    """A case note quoting what an engine printed, at most ``limit`` characters of it; None
+    when it printed nothing but white space."""
+    lines = [line.rstrip() for line in text.strip().splitlines() if line.strip()]
+    if not lines:
+        return None
+    said = "\n".join(lines)
+    if len(said) > limit:
+        said = f"{said[:limit]} … ({len(said) - limit} more characters)"
+    return f"the engine printed: {said}"

@@ -1,0 +1,270 @@
+"""The measuring stick's verdict on a run (DESIGN.md rule 5: ``ok`` is a promise).
+
+An adapter's own status says only that its integrator did not give up.  After every run the
+harness judges the returned :class:`~harness.trajectory.Trajectory` the same way for every adapter
+and withdraws ``ok`` at the first sample where
+
+1. a position, orientation or velocity is not finite (→ ``diverged``);
+2. a joint gap exceeds ``gap`` × the mechanism's size :func:`characteristic_length` (m), or a joint
+   orientation violation exceeds ``orientation`` (rad);
+3. the energy-balance error |e(t)| (:func:`harness.energy.energy_balance`) exceeds ``energy`` ×
+   the energy scale :func:`harness.energy.energy_scale` (J: the reference's largest kinetic
+   energy; M·|g|·ℓ for a scene at rest or without a reference; not judged, with a note, when
+   neither exists);
+4. the configuration left the assembly branch of the start: it is farther than ``branch`` × the
+   mechanism's size from the reference's configuration at the same value of the driver
+   coordinate (see :mod:`harness.branch`).
+
+Breaches 2–4 give ``failed`` (the run finished, the answer is wrong), or ``diverged`` when the
+quantity exceeds its bound :data:`DIVERGED_FACTOR`-fold (at the default bounds: a joint gap the
+size of the mechanism, an energy error 50 times its energy scale).  The reason names the first
+sample's time and every quantity breached there; ``failure_time`` is the last sample before it
+(the first sample's time if the breach is there); all samples are kept.  A run an adapter already
+reported as not ``ok`` keeps its own status and reason, and the stick's finding becomes a note.
+
+The default bounds (:class:`Bounds`) are physical, not tuned to any engine: a joint that has
+opened by half a percent of the mechanism's size, or an energy balance off by 5 % of the energy
+that moves it, is no longer the mechanism described (its link lengths, or its motion's energy,
+are wrong by that much).  A branch switch moves bodies by a sizeable fraction of the mechanism
+(metres on the four-bar), while an on-branch run stays within about its joint gaps of the
+reference's branch, so 10 % separates the two with margin on either side.  Measured at these
+bounds: in-house, MuJoCo, Pinocchio and Exudyn ``best`` on the four-bar (dt 1e-3 s, 1 s) stay
+≥ 100 times below every bound; at dt 1e-2 s over 4 s, MuJoCo ``default`` reaches a 0.39 % gap and
+6.2 % energy error, PyBullet ``default`` 29 %, Exudyn ``default`` 23 % (all failed); the seed's
+unstabilised rk4+none drifts to a 6 % gap on the spatial slider-crank (failed), and in-house
+``default`` (rk4+baumgarte) at dt 1e-2 s opens the planar slider-crank's joints by 1.6 % (failed).
+On the double four-bar (dt 1e-3 s) every ``best`` stays ≥ 38 times below every bound.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from harness.branch import BranchCheck, branch_distance
+from harness.energy import energy_balance, energy_scale
+from harness.metrics import violation_series
+from harness.model import GROUND, Mechanism, characteristic_length
+from harness.trajectory import Trajectory
+
+#: Largest joint gap, as a fraction of :func:`characteristic_length` (2.9 cm on the 5.7 m
+#: four-bar, 9 mm on the 1.9 m spatial slider-crank).
+GAP_FRACTION = 5e-3
+#: Largest joint orientation violation (angle between axes that should coincide), rad.  The
+#: angular counterpart of GAP_FRACTION: that gap at the end of a link of the mechanism's size.
+ORIENTATION_BOUND = 5e-3
+#: Largest |energy-balance error|, as a fraction of :func:`energy_scale`.
+ENERGY_FRACTION = 5e-2
+#: Largest distance from the reference's configuration at the same driver value, as a fraction of
+#: :func:`characteristic_length`.
+BRANCH_FRACTION = 1e-1
+#: A breach this many times past its bound is reported as ``diverged`` rather than ``failed``.
+DIVERGED_FACTOR = 1e3
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """The verdict's bounds (module constants by default); see the module docstring.
+
+    Attributes
+    ----------
+    gap : float
+        Joint gap / characteristic length.
+    orientation : float
+        Joint orientation violation, rad.
+    energy : float
+        |Energy-balance error| / energy scale.
+    branch : float
+        Distance from the reference's branch / characteristic length.
+    """
+
+    gap: float = GAP_FRACTION
+    orientation: float = ORIENTATION_BOUND
+    energy: float = ENERGY_FRACTION
+    branch: float = BRANCH_FRACTION
+
+    @classmethod
+    def parse(cls, text: str) -> "Bounds":
+        """Bounds from ``"gap=1e-2,energy=0.1"`` (unnamed ones keep their defaults).
+
+        Raises ValueError naming the bad item, the valid names, or the bad value.
+        """
+        names = [f.name for f in dataclasses.fields(cls)]
+        values = {}
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            key, sep, value = (s.strip() for s in item.partition("="))
+            if not sep or key not in names:
+                raise ValueError(f"bounds: expected NAME=VALUE with NAME one of {', '.join(names)},"
+                                 f" got {item!r}")
+            try:
+                number = float(value)
+            except ValueError:
+                number = float("nan")
+            if not (np.isfinite(number) and number > 0):
+                raise ValueError(f"bounds: {key} must be a positive finite number, got {value!r}")
+            values[key] = number
+        return cls(**values)
+
+
+DEFAULT_BOUNDS = Bounds()
+
+
+def joint_points(mech: Mechanism) -> list[tuple[int, np.ndarray]]:
+    """(body index, point in the body frame, m) of every joint point on a moving body."""
+    points = []
+    for joint in mech.joints:
+        for body, point in ((joint.body1, joint.point1), (joint.body2, joint.point2)):
+            if body != GROUND:
+                points.append((mech.body_index(body), np.asarray(point, dtype=float)))
+    return points
+
+
+def joint_violations(mech: Mechanism, trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """Largest joint gap (m) and orientation violation (rad) at every sample, each (n,), from the
+    neutral joint equations (:func:`harness.metrics.violation_series`); for a planar mechanism a
+    body's departure from the plane counts as a gap and its tilt out of it as an orientation
+    violation."""
+    series = violation_series(mech, trajectory)
+    gaps, angles = series["joint_gap_m"], series["orientation_rad"]
+    if mech.planar:
+        gaps = np.maximum(gaps, series["out_of_plane_m"])
+        angles = np.maximum(angles, series["tilt_rad"])
+    return gaps, angles
+
+
+@dataclass(frozen=True)
+class Check:
+    """One quantity judged at every sample.
+
+    ``ratio`` (n,) is the quantity over its bound (> 1: breached; inf: not finite);
+    ``describe(k)`` says what was found at sample k.
+    """
+
+    ratio: np.ndarray
+    describe: object
+
+
+def _finite_check(trajectory: Trajectory) -> Check:
+    arrays = (trajectory.position, trajectory.quaternion, trajectory.velocity,
+              trajectory.angular_velocity)
+    bad = ~np.all([np.isfinite(a).all(axis=(1, 2)) for a in arrays], axis=0)
+    names = ("position", "orientation", "velocity", "angular velocity")
+
+    def describe(k):
+        which = [n for n, a in zip(names, arrays) if not np.isfinite(a[k]).all()]
+        return f"non-finite {', '.join(which)}"
+    return Check(np.where(bad, np.inf, 0.0), describe)
+
+
+def _constraint_checks(mech: Mechanism, trajectory: Trajectory, bounds: Bounds) -> list[Check]:
+    length = characteristic_length(mech)
+    gap_bound = bounds.gap * length
+    gaps, angles = joint_violations(mech, trajectory)
+    return [
+        Check(gaps / gap_bound, lambda k: f"joint gap {gaps[k]:.3g} m exceeds {gap_bound:.3g} m "
+              f"({bounds.gap:g} of the mechanism's size {length:.3g} m)"),
+        Check(angles / bounds.orientation, lambda k: f"joint orientation violation "
+              f"{angles[k]:.3g} rad exceeds {bounds.orientation:g} rad"),
+    ]
+
+
+def _energy_check(mech: Mechanism, trajectory: Trajectory, reference, bounds: Bounds,
+                  notes: list) -> Check | None:
+    scale = energy_scale(mech, Trajectory.empty(len(mech.bodies)) if reference is None else reference)
+    if scale is None:
+        notes.append("energy balance not judged: the scene has no energy scale (no motion in the "
+                     "reference and no gravity)")
+        return None
+    error = np.abs(energy_balance(mech, trajectory, reference))
+    limit = bounds.energy * scale
+    return Check(error / limit, lambda k: f"energy-balance error {error[k]:.3g} J exceeds "
+                 f"{limit:.3g} J ({bounds.energy:g} of the energy scale {scale:.3g} J)")
+
+
+def _branch_check(mech: Mechanism, trajectory: Trajectory, reference: Trajectory,
+                  bounds: Bounds, notes: list) -> Check | None:
+    length = characteristic_length(mech)
+    limit = bounds.branch * length
+    result: BranchCheck = branch_distance(mech, trajectory, reference, limit)
+    if result.skipped:
+        notes.append(f"assembly branch not checked: {result.skipped}")
+        return None
+    unchecked = ~np.isfinite(result.distance)
+    if unchecked.any():
+        t = trajectory.times[unchecked]
+        notes.append(f"assembly branch not checked at {unchecked.sum()} samples (t = {t[0]:.6g} "
+                     f"to {t[-1]:.6g} s): the driver left the range of values the reference visits")
+    distance = np.where(unchecked, 0.0, result.distance)
+    return Check(distance / limit, lambda k: f"left the assembly branch (body "
+                 f"{mech.bodies[result.body[k]].name} is {distance[k]:.3g} m from the reference's "
+                 f"configuration at the same driver value; bound {limit:.3g} m, {bounds.branch:g} "
+                 f"of the mechanism's size)")
+
+
+def _stick_checks(mech, trajectory, reference, bounds, notes) -> list[Check]:
+    """Joint, energy and branch checks of a trajectory whose samples are all finite."""
+    checks = [*_constraint_checks(mech, trajectory, bounds),
+              _energy_check(mech, trajectory, reference, bounds, notes)]
+    if reference is None:
+        notes.append("assembly branch not checked: no reference")
+    else:
+        checks.append(_branch_check(mech, trajectory, reference, bounds, notes))
+    return [check for check in checks if check is not None]
+
+
+def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None = None,
+          bounds: Bounds = DEFAULT_BOUNDS) -> Trajectory:
+    """The trajectory with the stick's verdict applied (see the module docstring).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    trajectory : Trajectory
+        What the adapter returned; not modified.
+    reference : Trajectory or None
+        The verified reference; without it the assembly branch is not checked (a note says so)
+        and the energy scale is the static M·|g|·ℓ.
+    bounds : Bounds
+
+    Returns
+    -------
+    Trajectory
+        A copy with ``status``, ``reason``, ``failure_time`` and ``notes`` updated.
+    """
+    if trajectory.n_samples == 0:
+        return trajectory
+    notes = list(trajectory.notes)
+    finite = _finite_check(trajectory)
+    reached = int(np.argmax(np.isinf(finite.ratio))) if np.isinf(finite.ratio).any() \
+        else trajectory.n_samples
+    checks = [finite]
+    with np.errstate(all="ignore"):  # a run growing without bound overflows its energy
+        if reached:
+            checks += _stick_checks(mech, _prefix(trajectory, reached), reference, bounds, notes)
+    ratios = np.zeros((len(checks), trajectory.n_samples))
+    for row, check in zip(ratios, checks):
+        row[:check.ratio.size] = np.nan_to_num(check.ratio, nan=np.inf)
+    breached = np.flatnonzero((ratios > 1.0).any(axis=0))
+    if breached.size == 0:
+        return dataclasses.replace(trajectory, notes=notes)
+    k = int(breached[0])
+    found = "; ".join(check.describe(k) for check, row in zip(checks, ratios) if row[k] > 1.0)
+    time = float(trajectory.times[k])
+    reason = f"at t = {time:.6g} s: {found}"
+    if trajectory.status != "ok":
+        return dataclasses.replace(trajectory, notes=[*notes, f"the measuring stick: {reason}"])
+    diverged = bool(np.max(ratios[:, k]) >= DIVERGED_FACTOR)
+    return dataclasses.replace(trajectory, status="diverged" if diverged else "failed",
+                               reason=reason, failure_time=float(trajectory.times[max(k - 1, 0)]),
+                               notes=notes)
+
+
+def _prefix(trajectory: Trajectory, n: int) -> Trajectory:
+    """The first n samples (the finite ones) as a trajectory."""
+    return dataclasses.replace(trajectory, times=trajectory.times[:n],
+                               position=trajectory.position[:n],
+                               quaternion=trajectory.quaternion[:n],
+                               velocity=trajectory.velocity[:n],
+                               angular_velocity=trajectory.angular_velocity[:n])
