@@ -3,7 +3,8 @@
 Joint coordinates are measured from the joints' body-frame geometry: the rotation of a revolute or
 cylindrical joint is the angle from ``h = A₁ n̄₁`` to ``f = A₂ n̄₂`` about ``a = A₁ ā₁``
 (zero in the reference configuration, right-hand rule); the slide of a prismatic or translational
-joint is ``a · (p₂ − p₁)``.
+joint is ``a · (p₂ − p₁)``.  A body point p̄ (body frame) is at ``r + A p̄`` and moves with
+``v + ω × A p̄`` (ω in world axes, as the trajectory stores it).
 """
 
 from __future__ import annotations
@@ -67,8 +68,11 @@ def output_series(mech: Mechanism, trajectory: Trajectory, name: str) -> np.ndar
     if output.kind in ("position", "velocity"):
         data = trajectory.position if output.kind == "position" else trajectory.velocity
         return data[:, mech.body_index(output.target), output.component].copy()
-    joint = mech.joint(output.target)
     rotations = body_rotations(trajectory.quaternion)
+    if output.kind in ("point_position", "point_velocity"):
+        return point_state(mech, trajectory, output.target, output.point, rotations,
+                           velocity=output.kind == "point_velocity")[:, output.component]
+    joint = mech.joint(output.target)
     if output.kind == "joint_position":
         slide = joint_slide(mech, joint, trajectory.position, rotations)
         return slide - slide[0]
@@ -76,6 +80,32 @@ def output_series(mech: Mechanism, trajectory: Trajectory, name: str) -> np.ndar
     if output.kind == "joint_angle":
         return angle
     return joint_rate(mech, joint, trajectory.angular_velocity, rotations)
+
+
+def point_state(mech: Mechanism, trajectory: Trajectory, body: str, point: np.ndarray,
+                rotations: np.ndarray, velocity: bool) -> np.ndarray:
+    """World position ``r + A p̄`` (m) or velocity ``v + ω × A p̄`` (m/s) of a body point.
+
+    Parameters
+    ----------
+    body : str
+        A moving body's name.
+    point : ndarray, shape (3,)
+        The point in the body frame, m.
+    rotations : ndarray, shape (n_samples, n_bodies, 3, 3)
+        Body rotations (body → world) at every sample.
+    velocity : bool
+        Velocity instead of position.
+
+    Returns
+    -------
+    ndarray, shape (n_samples, 3)
+    """
+    index = mech.body_index(body)
+    arm = rotations[:, index] @ point
+    if velocity:
+        return trajectory.velocity[:, index] + np.cross(trajectory.angular_velocity[:, index], arm)
+    return trajectory.position[:, index] + arm
 
 
 def joint_rate(mech: Mechanism, joint: Joint, angular_velocity, rotations) -> np.ndarray:

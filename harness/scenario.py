@@ -16,7 +16,8 @@ File format (all SI; angles in degrees only where the key says ``_deg``)::
     [[bodies]]                    # centre-of-mass frame, reference configuration
     name = "crank"
     mass = 78.1
-    inertia = [Ixx, Iyy, Izz]     # or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], kg·m², body frame
+    inertia = [Ixx, Iyy, Izz]     # or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], kg·m², body frame;
+                                  # slender bar: [1/12, 0, 1/12] (see "Inertia" below)
     position = [x, y, z]
     angle_deg = 60.0              # planar; spatial: euler313_deg = [ψ, θ, φ] or quaternion = [w, x, y, z]
 
@@ -42,9 +43,48 @@ File format (all SI; angles in degrees only where the key says ``_deg``)::
     rate = 0.0                    # rad/s or m/s
     guess = { coupler = [x, y, z] }   # optional Newton start: picks the assembly branch
 
+    [[initial.velocities]]        # optional, any number: further velocities prescribed at t = 0
+    joint = "B"                   # a joint coordinate rate (drivable joint types, not the driver)
+    rate = 0.5                    # rad/s or m/s
+
+    [[initial.velocities]]
+    body = "crank"                # a body point's world velocity
+    location = [0.0, 1.0, 0.0]    # world, reference configuration (like joint locations)
+    velocity = [1.0, 0.0, 0.0]    # m/s, world
+    components = ["x"]            # optional, default all three (planar: x and y); the others
+                                  # are left to the constraints
+
     [outputs]
     crank_angle = { kind = "joint_angle", joint = "O" }
     slider_x = { kind = "position", body = "slider", component = "x" }
+    tip_x = { kind = "point_position", body = "crank", location = [0.0, 1.0, 0.0], component = "x" }
+    tip_vy = { kind = "point_velocity", body = "crank", location = [0.0, 1.0, 0.0],
+               component = "y" }
+
+Outputs: ``joint_angle``, ``joint_rate`` (rad, rad/s) and ``joint_position`` (m) name a joint;
+``position`` and ``velocity`` name a moving body (not ground) and a component of its centre of
+mass; ``point_position`` and ``point_velocity`` also take ``location``, a world point in the
+reference configuration that the loader converts to the body frame (p̄ = Aᵀ(location − r)), and
+report ``r + A p̄`` or ``v + ω × A p̄``.  ``component`` defaults to ``"x"``.
+
+Inertia: the tensor must be symmetric positive definite and satisfy the triangle inequality
+(each principal moment at most the sum of the other two), or describe a slender bar: exactly one
+principal moment zero (about the bar's axis) and the other two equal and positive, i.e. the
+triangle inequality holding with equality.  Zero means below 1e-12 of the trace.  Negative
+moments, two zero moments and a violated triangle inequality are rejected.  How each engine treats
+a zero moment is the adapter's business and is stated in its case notes.
+
+Prescribed velocities: ``initial.rate`` and every ``[[initial.velocities]]`` entry are velocity
+conditions at t = 0; with the constraints they must determine one consistent state.  The assembly
+checks them and refuses an inconsistent or insufficient start; the loader only checks that each
+names a known joint or body, a valid point and valid components.
+
+Limits: every number is finite (``nan`` and ``inf`` are rejected) and at most 1e100 in
+magnitude; masses and the duration are at least 1e-100.  The engines multiply up to three such
+numbers (m·v², I·ω², r × F), and 1e100³ stays inside the double range.  Names (of the scenario,
+bodies, joints, springs and outputs) are printable — no control or format characters such as a
+right-to-left override or a zero-width space — and not padded with whitespace; markup and emoji
+are fine.  In a planar scene every point (locations, prescribed velocities) lies in z = 0.
 """
 
 from __future__ import annotations
@@ -53,6 +93,7 @@ import hashlib
 import json
 import math
 import tomllib
+import unicodedata
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -73,6 +114,9 @@ from harness.model import (
     JointActuation,
     Mechanism,
     Output,
+    Prescribed,
+    PrescribedJointRate,
+    PrescribedPointVelocity,
     SpringDamper,
 )
 
@@ -91,9 +135,24 @@ _FORCE_KEYS = {
                       "damping", "free_length"},
 }
 _OUTPUT_KINDS = {"joint_angle": "joint", "joint_rate": "joint", "joint_position": "joint",
-                 "position": "body", "velocity": "body"}
+                 "position": "body", "velocity": "body",
+                 "point_position": "point", "point_velocity": "point"}
+_OUTPUT_KEYS = {"joint": {"kind", "joint"}, "body": {"kind", "body", "component"},
+                "point": {"kind", "body", "location", "component"}}
+_INITIAL_KEYS = {"driver", "value", "rate", "guess", "velocities"}
+_JOINT_RATE_KEYS = {"joint", "rate"}
+_POINT_VELOCITY_KEYS = {"body", "location", "velocity", "components"}
 _COMPONENTS = {"x": 0, "y": 1, "z": 2}
 _AXIS_TOL = 1e-9
+#: Largest magnitude of any number in a file, and smallest mass or duration: the engines multiply
+#: up to three such numbers (m·v², I·ω², r × F), and 1e100³ stays below the double range (1.8e308).
+_LARGEST = 1e100
+_SMALLEST = 1e-100
+#: Relative size (of the trace) below which a principal moment counts as zero: a slender bar.
+_ZERO_MOMENT = 1e-12
+#: Unicode categories a name may not contain: control, format (e.g. right-to-left override,
+#: zero-width space), surrogate, private-use, unassigned, line and paragraph separators.
+_UNPRINTABLE = {"Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"}
 
 
 @dataclass(frozen=True)
@@ -146,6 +205,15 @@ class _Collector:
             return None
         return value
 
+    def name(self, table: dict, key: str, path: str, default: str | None = None) -> str | None:
+        """A non-empty string fit to name something (see :func:`name_problem`)."""
+        value = self.string(table, key, path, default)
+        problem = None if value is None else name_problem(value)
+        if problem:
+            self.add(_join(path, key), problem)
+            return None
+        return value
+
     def number(self, table: dict, key: str, path: str, default: float | None = None,
                positive: bool = False, nonnegative: bool = False) -> float | None:
         value = table.get(key, default) if default is not None else self.required(table, key, path)
@@ -154,8 +222,14 @@ class _Collector:
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
             self.add(_join(path, key), f"expected a finite number, got {value!r}")
             return None
+        if abs(value) > _LARGEST:
+            self.add(_join(path, key), f"magnitude {value:g} exceeds the limit {_LARGEST:g}")
+            return None
         if positive and value <= 0:
             self.add(_join(path, key), f"must be > 0, got {value!r}")
+            return None
+        if positive and value < _SMALLEST:
+            self.add(_join(path, key), f"{value:g} is below the smallest allowed {_SMALLEST:g}")
             return None
         if nonnegative and value < 0:
             self.add(_join(path, key), f"must be >= 0, got {value!r}")
@@ -179,10 +253,28 @@ class _Collector:
         if not np.all(np.isfinite(array)):
             self.add(field, f"contains a non-finite value: {value!r}")
             return None
+        if np.abs(array).max() > _LARGEST:
+            self.add(field, f"a magnitude exceeds the limit {_LARGEST:g}: {value!r}")
+            return None
         if nonzero and np.linalg.norm(array) < _AXIS_TOL:
             self.add(field, "zero-length vector")
             return None
         return array
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a scenario, body, joint, force or output, or None.
+
+    Names are printed in tables and messages, so they must be printable and not padded; markup,
+    emoji and other printable characters are fine (every output escapes them).
+    """
+    bad = next((ch for ch in name if unicodedata.category(ch) in _UNPRINTABLE), None)
+    if bad is not None:
+        return (f"name {name!r} contains the unprintable character U+{ord(bad):04X} "
+                f"({unicodedata.category(bad)}); names must be printable")
+    if name != name.strip():
+        return f"name {name!r} has leading or trailing whitespace"
+    return None
 
 
 def _missing(*values) -> bool:
@@ -213,13 +305,23 @@ def inertia_tensor(values: np.ndarray) -> np.ndarray:
 
 
 def inertia_problem(tensor: np.ndarray) -> str | None:
-    """Why ``tensor`` is not a physical inertia tensor, or None."""
+    """Why ``tensor`` is not a physical inertia tensor, or None.
+
+    Accepts a positive definite tensor obeying the triangle inequality, or a slender bar's: one
+    principal moment zero (below ``_ZERO_MOMENT`` of the trace), the other two equal (the triangle
+    inequality with equality).  See the module docstring.
+    """
     principal = np.linalg.eigvalsh(tensor)
-    if principal[0] <= 0:
-        return f"not positive definite (principal moments {principal.tolist()})"
     total = principal.sum()
+    zero = _ZERO_MOMENT * abs(total)
+    listed = f"(principal moments {principal.tolist()})"
+    if principal[0] < -zero:
+        return f"has a negative principal moment {listed}"
+    if principal[1] <= zero:
+        return (f"has {'three' if principal[2] <= zero else 'two'} zero principal moments {listed}; "
+                "only a slender bar, with one zero moment about its axis, may have any")
     for moment in principal:
-        if moment > total - moment + 1e-12 * total:
+        if moment > total - moment + _ZERO_MOMENT * total:
             return ("breaks the triangle inequality: principal moment "
                     f"{moment:g} exceeds the sum of the other two ({total - moment:g})")
     return None
@@ -275,7 +377,7 @@ class _Builder:
     def build(self) -> Mechanism:
         c, doc = self.c, self.doc
         c.unknown_keys(doc, _TOP_KEYS, "")
-        name = c.string(doc, "name", "", default=self.stem)
+        name = c.name(doc, "name", "", default=self.stem)
         kind = c.string(doc, "kind", "")
         if kind is not None and kind not in ("planar", "spatial"):
             c.add("kind", f"expected 'planar' or 'spatial', got {kind!r}")
@@ -327,7 +429,7 @@ class _Builder:
         return [(f"{key}[{i}]", table) for i, table in enumerate(items)]
 
     def _unique_name(self, table: dict, path: str, seen: dict, reserved=()) -> str | None:
-        name = self.c.string(table, "name", path)
+        name = self.c.name(table, "name", path)
         if name is None:
             return None
         if name in seen or name in reserved:
@@ -531,7 +633,7 @@ class _Builder:
 
     def _force_spring_damper(self, table, path):
         c = self.c
-        name = c.string(table, "name", path, default="spring")
+        name = c.name(table, "name", path, default="spring")
         body1 = self._body_ref(table, "body1", path)
         body2 = self._body_ref(table, "body2", path)
         loc1 = c.vector(table, "location1", path)
@@ -551,17 +653,8 @@ class _Builder:
         if not isinstance(table, dict):
             c.add("initial", "missing required section [initial] with the driver")
             return None
-        c.unknown_keys(table, {"driver", "value", "rate", "guess"}, "initial")
-        driver = c.string(table, "driver", "initial")
-        if driver is not None:
-            joint = self.joints.get(driver, 0)
-            if driver not in self.joints:
-                c.add("initial.driver", f"unknown joint {driver!r} (known: {', '.join(self.joints)})")
-                driver = None
-            elif joint is not None and joint.type not in DRIVABLE:
-                c.add("initial.driver", f"joint {driver!r} is {joint.type}, which has no single "
-                      f"coordinate; drivable types: {', '.join(DRIVABLE)}")
-                driver = None
+        c.unknown_keys(table, _INITIAL_KEYS, "initial")
+        driver = self._drivable_joint(table, "driver", "initial")
         value = c.number(table, "value", "initial", default=0.0)
         rate = c.number(table, "rate", "initial", default=0.0)
         guess = {}
@@ -576,9 +669,106 @@ class _Builder:
             point = c.vector(raw_guess, body, "initial.guess")
             if point is not None:
                 guess[body] = point
-        if _missing(driver, value, rate):
+        prescribed = self._prescribed(table, driver)
+        if _missing(driver, value, rate, prescribed):
             return None
-        return InitialState(driver, value, rate, guess)
+        return InitialState(driver, value, rate, guess, prescribed)
+
+    def _drivable_joint(self, table: dict, key: str, path: str) -> str | None:
+        """The joint named by ``table[key]`` if it exists and has a single coordinate."""
+        name = self.c.string(table, key, path)
+        if name is None:
+            return None
+        field = _join(path, key)
+        if name not in self.joints:
+            self.c.add(field, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
+            return None
+        joint = self.joints[name]
+        if joint is not None and joint.type not in DRIVABLE:
+            self.c.add(field, f"joint {name!r} is {joint.type}, which has no single coordinate; "
+                       f"drivable types: {', '.join(DRIVABLE)}")
+            return None
+        return name
+
+    def _prescribed(self, table: dict, driver: str | None) -> tuple[Prescribed, ...] | None:
+        """The ``[[initial.velocities]]`` entries, or None if any is invalid."""
+        entries = table.get("velocities", [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            self.c.add("initial.velocities", "expected an array of tables ([[initial.velocities]])")
+            return None
+        prescribed, valid, seen_joints = [], True, set()
+        for index, entry in enumerate(entries):
+            path = f"initial.velocities[{index}]"
+            if ("joint" in entry) == ("body" in entry):
+                self.c.add(path, "give either joint (with rate) or body (with location and "
+                           "velocity)")
+                valid = False
+                continue
+            if "joint" in entry:
+                item = self._prescribed_rate(entry, path, driver, seen_joints)
+            else:
+                item = self._prescribed_point(entry, path)
+            valid = valid and item is not None
+            prescribed.append(item)
+        return tuple(prescribed) if valid else None
+
+    def _prescribed_rate(self, entry: dict, path: str, driver: str | None,
+                         seen: set[str]) -> PrescribedJointRate | None:
+        self.c.unknown_keys(entry, _JOINT_RATE_KEYS, path)
+        joint = self._drivable_joint(entry, "joint", path)
+        rate = self.c.number(entry, "rate", path)
+        if joint is not None and joint == driver:
+            self.c.add(_join(path, "joint"), f"joint {joint!r} is the driver; its rate is "
+                       "initial.rate")
+            return None
+        if joint is not None and joint in seen:
+            self.c.add(_join(path, "joint"), f"joint {joint!r} is prescribed twice")
+            return None
+        if joint is not None:
+            seen.add(joint)
+        return None if _missing(joint, rate) else PrescribedJointRate(joint, rate)
+
+    def _prescribed_point(self, entry: dict, path: str) -> PrescribedPointVelocity | None:
+        c = self.c
+        c.unknown_keys(entry, _POINT_VELOCITY_KEYS, path)
+        body = self._moving_body(entry, path)
+        location = self._planar_point(entry, "location", path)
+        velocity = self._planar_point(entry, "velocity", path)
+        components = self._components(entry, path)
+        if _missing(body, location, velocity, components):
+            return None
+        return PrescribedPointVelocity(body, self._local_point(body, location), velocity,
+                                       components)
+
+    def _moving_body(self, table: dict, path: str) -> str | None:
+        """A known, valid, non-ground body named by ``table["body"]``."""
+        body = self._body_ref(table, "body", path)
+        if body == GROUND:
+            self.c.add(_join(path, "body"), "ground does not move; name a body")
+            return None
+        if body is None or self.bodies[body] is None:
+            return None
+        return body
+
+    def _planar_point(self, table: dict, key: str, path: str) -> np.ndarray | None:
+        """A 3-vector; in a planar scene its z component must be 0."""
+        point = self.c.vector(table, key, path)
+        if self.planar and point is not None and point[2] != 0.0:
+            self.c.add(_join(path, key), "a planar scene lies in z = 0")
+            return None
+        return point
+
+    def _components(self, entry: dict, path: str) -> tuple[int, ...] | None:
+        letters = ("x", "y") if self.planar else ("x", "y", "z")
+        raw = entry.get("components", list(letters))
+        field = _join(path, "components")
+        if (not isinstance(raw, list) or not raw
+                or not all(isinstance(letter, str) and letter in letters for letter in raw)
+                or len(set(raw)) != len(raw)):
+            self.c.add(field, f"expected a non-empty list of distinct components from "
+                       f"{', '.join(letters)}, got {raw!r}")
+            return None
+        return tuple(_COMPONENTS[letter] for letter in raw)
 
     def _outputs(self) -> list[Output]:
         c = self.c
@@ -589,6 +779,10 @@ class _Builder:
         outputs = []
         for name, spec in table.items():
             path = f"outputs.{name}"
+            problem = name_problem(name)
+            if problem:
+                c.add(f"outputs[{name!r}]", problem)
+                continue
             if not isinstance(spec, dict):
                 c.add(path, "expected an inline table { kind = ..., ... }")
                 continue
@@ -600,17 +794,23 @@ class _Builder:
                       f"(known: {', '.join(_OUTPUT_KINDS)})")
                 continue
             ref = _OUTPUT_KINDS[kind]
-            allowed = {"kind", ref} | ({"component"} if ref == "body" else set())
-            c.unknown_keys(spec, allowed, path)
+            c.unknown_keys(spec, _OUTPUT_KEYS[ref], path)
             if ref == "joint":
                 target = self._joint_ref(spec, path)
-                component = 0
-            else:
-                target = self._body_ref(spec, "body", path)
-                letter = c.string(spec, "component", path, default="x")
-                component = _COMPONENTS.get(letter)
-                if component is None:
-                    c.add(_join(path, "component"), f"expected x, y or z, got {letter!r}")
+                if target is not None:
+                    outputs.append(Output(name, kind, target))
+                continue
+            target = self._moving_body(spec, path)
+            letter = c.string(spec, "component", path, default="x")
+            component = _COMPONENTS.get(letter)
+            if letter is not None and component is None:
+                c.add(_join(path, "component"), f"expected x, y or z, got {letter!r}")
+            point = None
+            if ref == "point":
+                location = self._planar_point(spec, "location", path)
+                if location is None or target is None:
+                    continue
+                point = self._local_point(target, location)
             if target is not None and component is not None:
-                outputs.append(Output(name, kind, target, component))
+                outputs.append(Output(name, kind, target, component, point))
         return outputs
