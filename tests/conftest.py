@@ -8,6 +8,11 @@ import pytest
 
 from harness import scenario
 
+#: Scenes with a shipped verified reference and the seed's outputs (crank_angle, driver "O"); the
+#: engine accuracy tables below are measured on them.  ``double_fourbar`` is not among them: its
+#: reference build is refused (the routes disagree by 1.2e-4 m at its singular passages).
+VERIFIED_SCENES = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
+
 
 def variant_text(name: str, replacements: list[tuple[str, str]]) -> str:
     """The shipped scenario ``name`` with each ``old`` text replaced by ``new`` (must occur)."""

