@@ -187,7 +187,7 @@ class _Collector:
 
     def unknown_keys(self, table: dict, allowed: set[str], path: str) -> None:
         for key in sorted(set(table) - allowed):
-            self.add(f"{path}.{key}" if path else key,
+            self.add(_join(path, _key_text(key)),
                      f"unknown key (allowed: {', '.join(sorted(allowed))})")
 
     def required(self, table: dict, key: str, path: str) -> Any:
@@ -284,6 +284,13 @@ def _missing(*values) -> bool:
 
 def _join(path: str, key: str) -> str:
     return f"{path}.{key}" if path else key
+
+
+def _key_text(key: str) -> str:
+    """``key`` as TOML writes it: bare when it can be, else quoted, so that an empty, spaced or
+    unprintable key still shows in the problem's field (``""``, not an empty field)."""
+    bare = key.isascii() and key.replace("_", "").replace("-", "").isalnum()
+    return key if bare else json.dumps(key)
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
@@ -569,7 +576,10 @@ class _Builder:
             second = axis2
         else:
             second = axis
-            normal = _perpendicular(axis) if normal is None else normal
+            # A given normal passed the 1e-9 perpendicularity check; project it exactly, so the
+            # joint's frame is orthonormal to round-off (engines in joint coordinates need it).
+            normal = (_perpendicular(axis) if normal is None
+                      else _unit(normal - (normal @ axis) * axis))
         return Joint(
             name=name, type=jtype, body1=body1, body2=body2, point1=point1, point2=point2,
             axis1=self._local_direction(body1, axis), axis2=self._local_direction(body2, second),

@@ -195,8 +195,9 @@ def mutated(draw) -> dict:
             if isinstance(joint, dict):
                 joint[draw(st.sampled_from(["body1", "body2"]))] = draw(st.one_of(
                     NAMES, st.sampled_from(bodies + [GROUND])))
-        elif kind == "unground" and len(bodies) > 1:  # every ground joint to a body: no ground
-            for joint in document.get("joints", []):
+        elif (kind == "unground" and len(set(bodies)) > 1  # every ground joint to another body
+              and isinstance(document.get("joints"), list)):
+            for joint in document["joints"]:
                 for end, other in (("body1", "body2"), ("body2", "body1")):
                     if isinstance(joint, dict) and joint.get(end) == GROUND:
                         joint[end] = next(b for b in bodies if b != joint.get(other))
@@ -210,8 +211,8 @@ def mutated(draw) -> dict:
         elif kind == "velocities" and isinstance(document.get("initial"), dict):
             document["initial"]["velocities"] = draw(st.lists(velocity_entry(bodies, joints),
                                                               max_size=3))
-        elif kind == "outputs":
-            document.setdefault("outputs", {})[draw(NAMES) or "o"] = draw(output_entry(bodies))
+        elif kind == "outputs" and isinstance(document.setdefault("outputs", {}), dict):
+            document["outputs"][draw(NAMES) or "o"] = draw(output_entry(bodies))
     return document
 
 
@@ -411,6 +412,8 @@ def check_file(text: str) -> None:
 # -- the tests -----------------------------------------------------------------------------------
 @DEFAULT
 @given(text=scenario_text())
+# Found (slow profile): an unknown empty key was reported with an empty field ("file: : unknown").
+@example(text='"" = "planar"\n')
 def test_loader_gives_a_clean_mechanism_or_one_clear_error(text):
     with scenario_file(text) as path:
         load_or_clear_error(path)

@@ -117,6 +117,23 @@ def test_moving_start_converts_exactly(load_variant, name):
                                    atol=1e-12, err_msg=field)
 
 
+def test_axis_a_hair_off_a_coordinate_axis_keeps_its_tilt(load_variant):
+    """Crank axis (0, 1e-9, 1): its unit z component rounds to exactly 1.0, yet the axis is not
+    z.  Built as RZ the crank turned about z and the start came back 2.0e-9 rad/s (angular
+    velocity) off: a ConversionError at t = 0.  Kept unaligned it converts to 1.5e-15 (measured)."""
+    mech = load_variant("fourbar_spatial", [
+        ("location = [0.0, 0.0, 0.0]\naxis = [0.0, 0.0, 1.0]",
+         "location = [0.0, 0.0, 0.0]\naxis = [0.0, 1e-9, 1.0]"),
+        ("rate = 0.0", "rate = 2.0")], stem="fourbar_spatial_tilted")
+    assert mech.joint("O").axis1[2] == 1.0 and mech.joint("O").axis1[1] != 0.0
+    trajectory = _run(mech, "rk4", 1e-3, 1e-3)
+    assert trajectory.status == "ok", trajectory.reason
+    start, first = initial_state(mech), trajectory.at(0)
+    for field in ("position", "quaternion", "velocity", "angular_velocity"):
+        np.testing.assert_allclose(getattr(first, field), getattr(start, field), rtol=0,
+                                   atol=1e-12, err_msg=field)
+
+
 # --- faithfulness ------------------------------------------------------------------------------
 
 _ZERO_SWITCHES = ["armature", "damping", "friction", "rotorInertia", "lowerDryFrictionLimit",

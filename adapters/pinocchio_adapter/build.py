@@ -198,10 +198,16 @@ def _joint_model(kind: str, parent_axis: np.ndarray, child_axis: np.ndarray):
 
 
 def _revolute(axis: np.ndarray):
-    """RX/RY/RZ for a positive coordinate axis, else RevoluteUnaligned."""
+    """RX/RY/RZ for exactly a positive coordinate axis, else RevoluteUnaligned.
+
+    The test is on every component: a unit axis tilted from a coordinate axis by less than
+    ~1.5e-8 rad has its largest component round to exactly 1.0, and snapping it would drop the
+    tilt (a generated axis (0, 5e-11, 1) became RZ: the start's angular velocity was then
+    reproduced only to 5e-11 rad/s).
+    """
     aligned = {0: pin.JointModelRX, 1: pin.JointModelRY, 2: pin.JointModelRZ}
     index = int(np.argmax(np.abs(axis)))
-    if axis[index] == 1.0:
+    if np.array_equal(axis, np.eye(3)[index]):
         return aligned[index]()
     return pin.JointModelRevoluteUnaligned(axis)
 
