@@ -18,6 +18,7 @@ import pinocchio as pin
 
 from adapters.integrators.base import StepFailure
 from adapters.pinocchio_adapter.build import PinocchioModel
+from adapters.pinocchio_adapter.state import frame_jacobian
 from harness.model import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
 
 
@@ -193,8 +194,7 @@ class ConstrainedProblem:
             _add_wrenches(self.pm, data, load, wrenches)
         tau = np.zeros(self.n)
         for frame, wrench in zip(self.pm.body_frames, wrenches):
-            jacobian = pin.getFrameJacobian(model, data, frame,
-                                            pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
+            jacobian = frame_jacobian(model, data, frame, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
             tau += jacobian.T @ wrench
         return tau
 

@@ -83,9 +83,15 @@ def _pose_errors(pm: PinocchioModel, data: pin.Data, q: np.ndarray, targets: lis
     for frame, target in zip(pm.body_frames, targets):
         gap = data.oMf[frame].actInv(target)
         errors.append(pin.log6(gap).vector)
-        local = pin.getFrameJacobian(model, data, frame, pin.ReferenceFrame.LOCAL)
+        local = frame_jacobian(model, data, frame, pin.ReferenceFrame.LOCAL)
         jacobians.append(-pin.Jlog6(gap.inverse()) @ local)
     return np.concatenate(errors), np.vstack(jacobians)
+
+
+def frame_jacobian(model: pin.Model, data: pin.Data, frame: int, reference) -> np.ndarray:
+    """``pin.getFrameJacobian`` as shape (6, nv) always: the binding returns a 1-D array of 6 when
+    the model has a single degree of freedom (a one-joint tree)."""
+    return np.reshape(pin.getFrameJacobian(model, data, frame, reference), (6, model.nv))
 
 
 def joint_state(pm: PinocchioModel, data: pin.Data, states: BodyStates) -> tuple:
@@ -127,7 +133,7 @@ def joint_state(pm: PinocchioModel, data: pin.Data, states: BodyStates) -> tuple
     twists = np.hstack([states.velocity, states.angular_velocity]).ravel()
     pin.computeJointJacobians(model, data, q)
     pin.updateFramePlacements(model, data)
-    jacobian = np.vstack([pin.getFrameJacobian(model, data, frame,
+    jacobian = np.vstack([frame_jacobian(model, data, frame,
                                                pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)
                           for frame in pm.body_frames])
     v = np.linalg.lstsq(jacobian, twists, rcond=None)[0]
