@@ -110,12 +110,19 @@ ORDER_TOLERANCE = 1e-9
 
 def _start(mech: Mechanism) -> BodyStates:
     """The harness's start of ``mech``; a start the assembly refuses (a singular configuration
-    drawn by chance) rejects the example."""
+    drawn by chance), or one whose accelerations are not unique (a slender bar free to spin about
+    its own axis: engines may answer anything, the in-house one fails on its singular matrix),
+    rejects the example."""
     try:
-        return initial_state(mech)
+        start = initial_state(mech)
+        accelerations(mech, start)
     except AssemblyError as error:
         event(f"start refused: {type(error).__name__}")
         reject()
+    except IndeterminateAccelerations:
+        event("accelerations not unique")
+        reject()
+    return start
 
 
 def _build(name: str, mech: Mechanism):
@@ -260,12 +267,7 @@ def test_start_reads_back_many(name, mech):
 def acceleration_gap(name: str, mech: Mechanism) -> tuple[float, float] | None:
     """``(|engine − neutral| acceleration, 1 + largest neutral acceleration)`` at the start;
     None if the adapter cannot build ``mech``."""
-    start = _start(mech)
-    try:
-        expected = accelerations(mech, start)
-    except IndeterminateAccelerations:
-        event("accelerations not unique")
-        reject()
+    expected = accelerations(mech, _start(mech))
     built = _build(name, mech)
     if built is None:
         return None
