@@ -7,6 +7,7 @@ import json
 
 import numpy as np
 import pytest
+from conftest import variant_text
 
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.kinematics import assemble as inhouse_assemble
@@ -21,45 +22,11 @@ from harness.rank import CONDITION_LIMIT
 
 SHIPPED = scenario.scenario_names()
 
-# The IFToMM N-four-bar with N = 2, written here: five 1 m bars of 1 kg, three vertical cranks on
-# ground pivots at x = 0, 1, 2, two horizontal couplers at y = 1, seven revolute joints.
-NFOURBAR = """
-kind = "planar"
-plane = "xy"
-duration = 1.0
-gravity = [0.0, -9.81, 0.0]
-""" + "".join(f"""
-[[bodies]]
-name = "{name}"
-mass = 1.0
-inertia = [1e-6, 0.08333333333333333, 0.08333333333333333]
-position = [{x}, {y}, 0.0]
-angle_deg = {angle}
-""" for name, x, y, angle in [("crank1", 0.0, 0.5, 90.0), ("coupler1", 0.5, 1.0, 0.0),
-                              ("crank2", 1.0, 0.5, 90.0), ("coupler2", 1.5, 1.0, 0.0),
-                              ("crank3", 2.0, 0.5, 90.0)]) + "".join(f"""
-[[joints]]
-name = "{name}"
-type = "revolute"
-body1 = "{body1}"
-body2 = "{body2}"
-location = [{x}, {y}, 0.0]
-""" for name, body1, body2, x, y in [
-    ("O1", "ground", "crank1", 0.0, 0.0), ("O2", "ground", "crank2", 1.0, 0.0),
-    ("O3", "ground", "crank3", 2.0, 0.0), ("A1", "crank1", "coupler1", 0.0, 1.0),
-    ("B1", "coupler1", "crank2", 1.0, 1.0), ("A2", "crank2", "coupler2", 1.0, 1.0),
-    ("B2", "coupler2", "crank3", 2.0, 1.0)]) + """
-[initial]
-driver = "O1"
-value = VALUE
-rate = -1.0
-"""
-
-
 @pytest.fixture
-def nfourbar(write_scenario):
+def nfourbar(load_variant):
+    """The shipped IFToMM N-four-bar (N = 2) with its driver O1 at ``value`` (rad, text)."""
     def load(value: str):
-        return scenario.load(write_scenario("nfourbar", NFOURBAR.replace("VALUE", value)))
+        return load_variant("double_fourbar", [("value = 0.0", f"value = {value}")], "nfourbar")
     return load
 
 
@@ -238,7 +205,8 @@ def test_check_all_reports_mobility_one_and_no_redundancy(capsys):
 
 
 def test_check_refuses_the_singular_start_with_a_warning(capsys, write_scenario):
-    path = write_scenario("nfourbar_flat", NFOURBAR.replace("VALUE", "-1.5707963267948966"))
+    text = variant_text("double_fourbar", [("value = 0.0", "value = -1.5707963267948966")])
+    path = write_scenario("nfourbar_flat", text)
     status, rows = check_json(capsys, str(path))
     assert status == 1
     assert "singular configuration" in rows[0]["error"]
