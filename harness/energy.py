@@ -37,7 +37,7 @@ from scipy.interpolate import make_interp_spline
 
 from harness.model import (BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper,
                            characteristic_length)
-from harness.outputs import body_frame, body_rotations, joint_angle, joint_slide
+from harness.outputs import body_frame, body_rotations, joint_angle, joint_slide, wrap_angle
 from harness.sampling import reference_indices
 from harness.trajectory import BodyStates, Trajectory
 
@@ -81,10 +81,6 @@ def potential_energy(mech: Mechanism, positions, rotations, velocity, angular_ve
         length, _ = _spring_geometry(mech, spring, positions, rotations, velocity, angular_velocity)
         total = total + 0.5 * spring.stiffness * (length - spring.free_length) ** 2
     return total
-
-
-def _wrap(angle):
-    return (angle + np.pi) % (2.0 * np.pi) - np.pi
 
 
 def _has_work_coordinate(mech: Mechanism, force) -> bool:
@@ -137,7 +133,7 @@ def interval_work(mech: Mechanism, start: dict, end: dict, dt) -> np.ndarray:
     for force in (f for f in mech.forces if _has_work_coordinate(mech, f)):
         magnitude, c0, angular = _work_coordinate(mech, force, start)
         _, c1, _ = _work_coordinate(mech, force, end)
-        work = work + magnitude * (_wrap(c1 - c0) if angular else c1 - c0)
+        work = work + magnitude * (wrap_angle(c1 - c0) if angular else c1 - c0)
     for force in _quadrature_loads(mech):
         work = work + 0.5 * (_power(mech, force, start) + _power(mech, force, end)) * dt
     return work

@@ -49,35 +49,15 @@ from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from harness.model import Joint, Mechanism
+from harness.outputs import body_rotations, wrap_angle
 
 _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])
 #: Row kinds: a length (joint gaps, distances from a slide line) or an angle.
 GAP, ORIENTATION = "gap", "orientation"
 _UNIT = {GAP: "m", ORIENTATION: "rad"}
-
-
-def wrap_angle(angle):
-    """Angle(s) wrapped to (−π, π], rad."""
-    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
-
-
-def rotation_matrices(quaternion: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) from scalar-first quaternions (..., 4), normalised.
-
-    A non-finite or zero quaternion (a diverged engine state) gives a NaN matrix instead of an
-    exception, so the metrics of a blown-up run stay computable.
-    """
-    flat = np.asarray(quaternion, dtype=float).reshape(-1, 4)
-    norm = np.linalg.norm(flat, axis=1)
-    valid = np.isfinite(norm) & (norm > 0.0)
-    matrices = np.full((flat.shape[0], 3, 3), np.nan)
-    if np.any(valid):
-        matrices[valid] = Rotation.from_quat(flat[valid], scalar_first=True).as_matrix()
-    return matrices.reshape(*np.shape(quaternion)[:-1], 3, 3)
 
 
 @dataclass(frozen=True)
@@ -442,7 +422,7 @@ class JointEquations:
 
     # -- evaluation ---------------------------------------------------------------------------
     def _pose(self, position, quaternion) -> _Pose:
-        return _Pose.of(position, rotation_matrices(quaternion))
+        return _Pose.of(position, body_rotations(quaternion))
 
     def residuals(self, position, quaternion, t=0.0) -> np.ndarray:
         """Residuals, shape (..., m), m or rad (see :attr:`units`).
@@ -552,7 +532,7 @@ class JointEquations:
             body z axis and world z; with velocities also ``"out_of_plane_velocity_m_s"``: |v_z|,
             and ``"out_of_plane_angular_velocity_rad_s"``: |(ω_x, ω_y)|.
         """
-        z_axis = rotation_matrices(quaternion)[..., :, 2]
+        z_axis = body_rotations(quaternion)[..., :, 2]
         result = {
             "out_of_plane_m": np.abs(np.asarray(position)[..., 2]),
             "tilt_rad": np.arctan2(np.linalg.norm(z_axis[..., :2], axis=-1), z_axis[..., 2]),
@@ -571,7 +551,7 @@ def point_velocity_jacobian(mech: Mechanism, body: str, point: np.ndarray, posit
     The point ``point`` (body frame, m) of ``body`` moves at v + ω × s, s = A·point, so row k
     holds e_k on the body's v columns and s × e_k on its ω columns (planar: [v_x, v_y, ω_z]).
     """
-    pose = _Pose.of(position, rotation_matrices(quaternion))
+    pose = _Pose.of(position, body_rotations(quaternion))
     index = mech.body_index(body)
     arm = pose.vector(index, np.asarray(point, dtype=float))
     block = np.concatenate([np.eye(3), np.cross(arm[None, :], np.eye(3))], axis=-1)

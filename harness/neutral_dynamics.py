@@ -39,7 +39,8 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from harness.joint_equations import JointEquations, rotation_matrices
+from harness.joint_equations import JointEquations
+from harness.outputs import body_rotations
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 from harness.trajectory import BodyStates
 
@@ -91,7 +92,7 @@ def applied_wrenches(mech: Mechanism, states: BodyStates) -> np.ndarray:
 
     Gravity and every load of ``mech.forces`` (see the module docstring); N and N·m.
     """
-    rotations = rotation_matrices(states.quaternion)
+    rotations = body_rotations(states.quaternion)
     wrench = np.zeros((len(mech.bodies) + 1, 2, 3))  # last row: ground, discarded
 
     def push(body: int, force: np.ndarray, arm: np.ndarray, torque=np.zeros(3)) -> None:
@@ -196,7 +197,7 @@ def accelerations(mech: Mechanism, states: BodyStates) -> Accelerations:
         If the accelerations are not unique (see the module docstring); the message names the
         body that moves most in the undetermined motion.
     """
-    rotations = rotation_matrices(states.quaternion)
+    rotations = body_rotations(states.quaternion)
     inertia = _world_inertias(mech, rotations)
     wrench = applied_wrenches(mech, states)
     omega = np.asarray(states.angular_velocity, dtype=float)

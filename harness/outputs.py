@@ -17,9 +17,23 @@ from harness.trajectory import Trajectory
 
 
 def body_rotations(quaternions: np.ndarray) -> np.ndarray:
-    """Rotation matrices (..., 3, 3) from scalar-first quaternions (..., 4)."""
-    flat = quaternions.reshape(-1, 4)
-    return Rotation.from_quat(flat, scalar_first=True).as_matrix().reshape(*quaternions.shape[:-1], 3, 3)
+    """Rotation matrices (..., 3, 3) from scalar-first quaternions (..., 4), normalised.
+
+    A non-finite or zero quaternion (a diverged engine state) gives a NaN matrix instead of an
+    exception, so the metrics of a blown-up run stay computable.
+    """
+    flat = np.asarray(quaternions, dtype=float).reshape(-1, 4)
+    norm = np.linalg.norm(flat, axis=1)
+    valid = np.isfinite(norm) & (norm > 0.0)
+    matrices = np.full((flat.shape[0], 3, 3), np.nan)
+    if np.any(valid):
+        matrices[valid] = Rotation.from_quat(flat[valid], scalar_first=True).as_matrix()
+    return matrices.reshape(*np.shape(quaternions)[:-1], 3, 3)
+
+
+def wrap_angle(angle):
+    """Angle(s) wrapped to (−π, π], rad."""
+    return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)
 
 
 def body_frame(mech: Mechanism, body: str, positions, rotations):
