@@ -213,30 +213,32 @@ POISON = [
 ]
 
 
+def poison_reads(monkeypatch, adapter, after: float, corrupt) -> None:
+    """Make every state the adapter's stepper reads at t > ``after`` pass through ``corrupt``."""
+    start = adapter._start
+
+    def poisoned_start(*args):
+        stepper = start(*args)
+        read = stepper._states
+        stepper._states = lambda t: corrupt(read(t)) if t > after else read(t)
+        return stepper
+
+    monkeypatch.setattr(adapter, "_start", poisoned_start)
+
+
 @pytest.mark.parametrize("name", adapter_names())
 @pytest.mark.parametrize("field, value, reason", POISON)
 def test_a_bad_state_is_diverged_at_the_last_good_time(built, monkeypatch, name, field, value,
                                                        reason):
     """The state read after step FAILING_STEP gets ``value`` in one component of ``field``."""
     adapter, model = built[name]
-    start = adapter._start
 
-    def poisoned_start(*args):
-        stepper = start(*args)
-        read = stepper._states
+    def corrupt(states):
+        bad = np.array(getattr(states, field), dtype=float)
+        bad[0, 2] = value
+        return dataclasses.replace(states, **{field: bad})
 
-        def poisoned_read(t):
-            states = read(t)
-            if t > (FAILING_STEP - 0.5) * DT:
-                bad = np.array(getattr(states, field), dtype=float)
-                bad[0, 2] = value
-                states = dataclasses.replace(states, **{field: bad})
-            return states
-
-        stepper._states = poisoned_read
-        return stepper
-
-    monkeypatch.setattr(adapter, "_start", poisoned_start)
+    poison_reads(monkeypatch, adapter, (FAILING_STEP - 0.5) * DT, corrupt)
     trajectory = adapter.simulate(model, RUNNING_METHOD[name], DT, T_END, EVERY_STEP)
     assert trajectory.status == "diverged"
     assert trajectory.reason.startswith(reason)
@@ -247,22 +249,8 @@ def test_a_bad_state_is_diverged_at_the_last_good_time(built, monkeypatch, name,
 def test_divergence_after_the_last_sample_is_caught(built, monkeypatch):
     """The state at t_end is checked even when t_end is not a sample time."""
     adapter, model = built["inhouse"]
-    start = adapter._start
-
-    def poisoned_start(*args):
-        stepper = start(*args)
-        read = stepper._states
-
-        def poisoned_read(t):
-            states = read(t)
-            if t > T_END - 0.5 * DT:
-                states = dataclasses.replace(states, velocity=np.full_like(states.velocity, np.nan))
-            return states
-
-        stepper._states = poisoned_read
-        return stepper
-
-    monkeypatch.setattr(adapter, "_start", poisoned_start)
+    poison_reads(monkeypatch, adapter, T_END - 0.5 * DT, lambda states: dataclasses.replace(
+        states, velocity=np.full_like(states.velocity, np.nan)))
     trajectory = adapter.simulate(model, "default", DT, T_END, EVERY_STEP[:6])
     assert trajectory.status == "diverged" and trajectory.n_samples == 6
     assert trajectory.failure_time == pytest.approx(5 * DT, rel=1e-12)

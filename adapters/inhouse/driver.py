@@ -4,12 +4,12 @@ assembled initial state, driven by the shared run loop (:meth:`adapters.base.Ada
 Fixed-step methods are read after step round(t / dt).  Adaptive methods are read at the sample
 times: the state of the step that ends there, else the solver's dense output inside the last
 step.  Dense output is not a state the method carried when the formulation corrects the state
-after every step (``direct``, ``geometric``, ``massproj``): it is then projected at each sample
+after every step (``direct``, ``geometric``): it is then projected at each sample
 time (:meth:`InhouseStepper._carried`: the position projection of seed 002 eq. 127 and the
-velocity projection of eq. 137, the ``direct`` strategy's correction, or the formulation's own
-when it has no position projection), so that the reported constraint violations and energies
-are those of states on the manifold the method keeps its steps on.  That projection is a reading, not part of
-the method: its cost is not counted, and the integration goes on from the step's own state.
+velocity projection of eq. 137, the ``direct`` strategy's correction), so that the reported
+constraint violations and energies are those of states on the manifold the method keeps its steps
+on.  That projection is a reading, not part of the method: its cost is not counted, and the
+integration goes on from the step's own state.
 """
 
 from __future__ import annotations
@@ -137,20 +137,16 @@ class InhouseStepper(Stepper):
         """(q, q̇) at ``t`` put back on the constraints; the formulation's counters are left as
         they were.
 
-        A formulation with a position projection (``direct``, ``geometric``) gets it (002
-        eq. 127) followed by the velocity projection q̇ − Φ_q⁺ Φ_q q̇ (eq. 137, minimum-norm least
-        squares): ``geometric``'s own velocity correction integrates the work along the steps and
-        cannot be replayed at a sample.  Any other correcting formulation (``massproj``) gets its
-        own ``project``, which must be a function of the state alone.
+        The position projection (002 eq. 127) of the formulation (``direct``, ``geometric``: the
+        only correcting ones), then the velocity projection q̇ − Φ_q⁺ Φ_q q̇ (eq. 137,
+        minimum-norm least squares): ``geometric``'s own velocity correction integrates the work
+        along the steps and cannot be replayed at a sample.
         """
         formulation = self.formulation
         counters = dict(formulation.counters)
-        if hasattr(formulation, "project_position"):
-            q = formulation.project_position(t, q)
-            jac = formulation.jacobian(t, q)
-            v = v - np.linalg.lstsq(jac, jac @ v, rcond=None)[0]
-        else:
-            q, v = formulation.project(t, q, v)
+        q = formulation.project_position(t, q)
+        jac = formulation.jacobian(t, q)
+        v = v - np.linalg.lstsq(jac, jac @ v, rcond=None)[0]
         formulation.counters.update(counters)
         return q, v
 
