@@ -356,6 +356,21 @@ class Adapter(abc.ABC):
         """
         raise UnsupportedCase(f"the {self.name} adapter has no model file to export")
 
+    def model_size(self, model) -> dict:
+        """What the engine carries for the mechanism of ``model`` (from :meth:`build`).
+
+        Returns
+        -------
+        dict
+            ``coordinates`` (int: generalized position coordinates the engine integrates),
+            ``constraint_equations`` (int: constraint rows it enforces), ``redundant_equations``
+            (int: rows among those that are linear combinations of the others) and ``notes``
+            (str: how they were counted).  This default reports nothing (None counts, a note
+            saying so); every shipped adapter overrides it.
+        """
+        return {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
+                "notes": f"the {self.name} adapter does not report its model size"}
+
     def simulate(self, model, method: str, dt: float, t_end: float,
                  sample_times: np.ndarray) -> Trajectory:
         """Run ``method`` from the harness's assembled state and sample every body.

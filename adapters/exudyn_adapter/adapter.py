@@ -82,6 +82,23 @@ class ExudynAdapter(Adapter):
                                           f"Exudyn 2D joints are {', '.join(PLANAR_JOINT_TYPES)}")
         return ExudynModel(mechanism)
 
+    def model_size(self, model: ExudynModel) -> dict:
+        """ODE2 coordinates and algebraic equations (AE) of the Exudyn system a run builds
+        (Euler-parameter nodes, the methods' default rotation; the AE include one normalisation
+        per spatial node), and the redundant AE: rows minus the rank (``numpy.linalg.matrix_rank``)
+        of Exudyn's own ∂AE/∂q at the start (``ComputeJacobianAE``, the ODE2 columns)."""
+        with _quiet():
+            system = ExudynSystem(model.mechanism, "ep")
+            solver = exu.MainSolverImplicitSecondOrder()
+            solver.InitializeSolver(system.mbs, exu.SimulationSettings())
+            solver.ComputeJacobianAE(system.mbs, 1.0, 0.0, 0.0, False)
+        coordinates, rows = int(solver.GetODE2size()), int(solver.GetAEsize())
+        rank = int(np.linalg.matrix_rank(solver.GetSystemJacobian()[coordinates:, :coordinates]))
+        return {"coordinates": coordinates, "constraint_equations": rows,
+                "redundant_equations": rows - rank,
+                "notes": f"Exudyn ODE2 size {coordinates}, AE size {rows}, rank of ∂AE/∂q "
+                         f"{rank}"}
+
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
         _validate_params(params)
 

@@ -81,6 +81,21 @@ class InhouseAdapter(Adapter):
     def build(self, mechanism: Mechanism) -> Mechanism:
         return mechanism
 
+    def model_size(self, model: Mechanism) -> dict:
+        """Absolute coordinates q (3 per planar body; 7 per spatial body: position and Euler
+        parameters) and the Φ rows of the joints (with the Euler-parameter normalisations), the
+        redundant ones from the rank analysis at the common start
+        (:func:`.kinematics.rank_report`, full-pivot elimination of Φ_q)."""
+        from adapters.inhouse.kinematics import common_start, rank_report
+
+        report = rank_report(model, common_start(model).q)
+        return {"coordinates": report.n_coordinates, "constraint_equations": report.n_equations,
+                "redundant_equations": len(report.redundant),
+                "notes": f"absolute coordinates: {report.n_coordinates} q, {report.n_equations} "
+                         f"Φ rows of rank {report.rank}"
+                         + (f", redundant: {', '.join(report.redundant_labels)}"
+                            if report.redundant else "")}
+
     def _mechanism(self, model: Mechanism) -> Mechanism:
         return model
 

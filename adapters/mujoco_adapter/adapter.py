@@ -6,6 +6,7 @@ and :mod:`.stepping`, the engine-specific stepper driven by the shared run loop
 from __future__ import annotations
 
 import mujoco
+import numpy as np
 
 from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
 from adapters.mujoco_adapter.build import MujocoModel, build_model
@@ -57,6 +58,18 @@ class MujocoAdapter(Adapter):
     def export(self, mechanism: Mechanism) -> str:
         """The MJCF text of ``mechanism`` (:func:`export_mjcf`)."""
         return export_mjcf(mechanism)
+
+    def model_size(self, model: MujocoModel) -> dict:
+        """``nq`` of the compiled model and its equality rows (``efc`` rows of type equality
+        after one ``mj_forward``: 3 per ``connect``, 6 per ``weld``); redundant rows are the
+        closure equations beyond the cut joints' class in the mechanism's dimension."""
+        data = mujoco.MjData(model.model)
+        mujoco.mj_forward(model.model, data)
+        rows = int(np.count_nonzero(data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY))
+        return {"coordinates": int(model.model.nq), "constraint_equations": rows,
+                "redundant_equations": model.tree.redundant_closure_equations,
+                "notes": f"MuJoCo nq = {model.model.nq} (tree joints), {model.model.neq} "
+                         f"equality constraint(s) with {rows} rows closing the loops"}
 
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
         _check_params(params)

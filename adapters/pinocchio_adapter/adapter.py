@@ -82,6 +82,18 @@ class PinocchioAdapter(Adapter):
         """The Pinocchio model of ``mechanism`` (see :func:`.build.build_model`)."""
         return build_model(mechanism)
 
+    def model_size(self, model: PinocchioModel) -> dict:
+        """``nq`` of the kinematic tree and the rows of its loop-closure constraints
+        (``RigidConstraintModel.residualSize()``: 3 for a point contact, 6 for a 6-D one);
+        redundant rows are the closure equations beyond the cut joints' class in the mechanism's
+        dimension."""
+        rows = sum(int(constraint.residualSize()) for constraint in model.constraints)
+        return {"coordinates": int(model.model.nq), "constraint_equations": rows,
+                "redundant_equations": model.tree.redundant_closure_equations,
+                "notes": f"Pinocchio nq = {model.model.nq} (tree joints), "
+                         f"{len(model.constraints)} rigid constraint(s) with {rows} rows closing "
+                         f"the loops"}
+
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
         if params["integrator"] not in integrator_names():
             raise ValueError(f"unknown integrator {params['integrator']!r}; valid: "

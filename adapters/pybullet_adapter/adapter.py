@@ -88,6 +88,14 @@ class _BulletStepper(Stepper):
         self._exit.close()
 
 
+#: Position coordinates of each Bullet joint type (``getJointInfo``'s jointType).
+_JOINT_COORDINATES = {pybullet.JOINT_REVOLUTE: 1, pybullet.JOINT_PRISMATIC: 1,
+                      pybullet.JOINT_SPHERICAL: 4, pybullet.JOINT_FIXED: 0}
+#: Constraint rows of each Bullet user-constraint type (``getConstraintInfo``'s jointType).
+_CONSTRAINT_ROWS = {pybullet.JOINT_POINT2POINT: 3, pybullet.JOINT_FIXED: 6,
+                    pybullet.JOINT_GEAR: 1}
+
+
 class PybulletAdapter(Adapter):
     """PyBullet (Bullet's Featherstone multibody with sequential-impulse or LCP constraints)."""
 
@@ -110,6 +118,25 @@ class PybulletAdapter(Adapter):
 
     def build(self, mechanism: Mechanism) -> PybulletModel:
         return build_model(mechanism)
+
+    def model_size(self, model: PybulletModel) -> dict:
+        """Position coordinates of the Bullet multibody (per joint: 1 revolute or prismatic,
+        4 spherical, 0 fixed, read from ``getJointInfo``) and the rows of its cut-joint
+        constraints (3 per point-to-point ``getConstraintInfo``); redundant rows are the closure
+        equations beyond the cut joints' class in the mechanism's dimension."""
+        with bullet_world(model, None, 0.01) as world:
+            kinds = [pybullet.getJointInfo(world.body, j, physicsClientId=world.client)[2]
+                     for j in range(pybullet.getNumJoints(world.body,
+                                                          physicsClientId=world.client))]
+            constraints = [pybullet.getConstraintInfo(c, physicsClientId=world.client)[4]
+                           for c in world.constraints]
+        coordinates = sum(_JOINT_COORDINATES[kind] for kind in kinds)
+        rows = sum(_CONSTRAINT_ROWS[kind] for kind in constraints)
+        return {"coordinates": coordinates, "constraint_equations": rows,
+                "redundant_equations": model.tree.redundant_closure_equations,
+                "notes": f"Bullet multibody with {len(kinds)} joint(s), {coordinates} position "
+                         f"coordinates; {len(constraints)} point-to-point constraint(s) with "
+                         f"{rows} rows closing the loops"}
 
     def _start(self, model: PybulletModel, spec: MethodSpec, params: dict,
                grid: RunGrid) -> _BulletStepper:
