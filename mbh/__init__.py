@@ -1,0 +1,13 @@
+"""mbh: load stored campaign results into pandas.
+
+>>> import mbh
+>>> runs = mbh.list_runs()                 # manifests, oldest first
+>>> cases = mbh.load_run(runs[-1]["run_id"])  # one row per case (harness.store column names)
+
+The harness itself lives in the ``harness`` and ``adapters`` packages; this package only names
+the store's reading functions for users.
+"""
+
+from harness.store import RunStore, compare_runs, list_runs, load_run, results_root
+
+__all__ = ["RunStore", "compare_runs", "list_runs", "load_run", "results_root"]
