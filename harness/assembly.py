@@ -118,10 +118,28 @@ def _where(equations: JointEquations, residual: np.ndarray) -> tuple[float, str]
     return value, (f"{equations.labels[worst]} ({equations.units[worst]})" if residual.size else "")
 
 
-def _newton(mech: Mechanism, equations: JointEquations, tolerance: float):
-    """Newton–Raphson on the body poses; returns (position, rotation, residual, iterations,
-    converged) at the best iterate."""
-    position, rotation = _start_pose(mech)
+def newton_positions(mech: Mechanism, equations, tolerance: float,
+                     start: tuple[np.ndarray, Rotation] | None = None):
+    """Newton–Raphson on the body poses, least-squares steps in body twists (so consistent
+    redundant rows are fine).
+
+    Parameters
+    ----------
+    mech : Mechanism
+    equations
+        :class:`~harness.joint_equations.JointEquations` or an object with its ``residuals`` and
+        ``jacobian``.
+    tolerance : float
+        max |residual| (m or rad) at which the iteration has converged; two polishing steps
+        follow.
+    start : (position (n_bodies, 3), Rotation of n_bodies), optional
+        First iterate; default the reference configuration with ``initial.guess`` positions.
+
+    Returns
+    -------
+    (position, rotation, residual, iterations, converged) at the best iterate.
+    """
+    position, rotation = _start_pose(mech) if start is None else start
     best = (position, rotation, np.inf)
     converged_at = None
     for iteration in range(MAX_ITERATIONS + POLISH_STEPS + 1):
@@ -221,7 +239,8 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
     driver = mech.initial.driver
     equations = JointEquations(mech, with_driver=True, drive=(value, rate))
     tolerance = POSITION_TOLERANCE * _size(mech)
-    position, rotation, residual, iterations, converged = _newton(mech, equations, tolerance)
+    position, rotation, residual, iterations, converged = newton_positions(mech, equations,
+                                                                         tolerance)
     quaternion = rotation.as_quat(scalar_first=True)
     if not converged:
         worst, label = _where(equations, equations.residuals(position, quaternion))

@@ -229,6 +229,9 @@ class Mechanism:
     notes: str = ""
     source: str = ""
     content_hash: str = ""
+    #: Pairs of joints that turn by equal angles on the assembly branch the motion stays on
+    #: (``[reference] equal_joint_angles``); only the reference routes use them.
+    branch: tuple[tuple[str, str], ...] = ()
 
     @property
     def planar(self) -> bool:

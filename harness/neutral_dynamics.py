@@ -19,7 +19,7 @@ body with a zero principal moment free to turn about that axis: a slender bar on
 spherical joint on its own axis) any rate of that turn solves the equations, and
 :class:`IndeterminateAccelerations` is raised rather than one of them returned.  Ġ ν is the central
 difference of :meth:`~harness.joint_equations.JointEquations.velocity_residuals` along the motion
-at fixed twists (positions advanced by v·h, orientations by the rotation ω·h).
+at fixed twists (positions advanced by v·h, orientations by the rotation ω·h), of sixth order.
 
 Planar mechanisms use the planar twists [v_x, v_y, ω_z] of the joint equations, with the inertia
 about z; their gyroscopic term vanishes (z is a principal axis of a planar body).
@@ -44,15 +44,22 @@ from harness.outputs import body_rotations
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 from harness.trajectory import BodyStates
 
-#: Time step (s) of the central difference that gives Ġ ν: truncation O(h²) ≈ 1e-10 relative,
-#: round-off ≈ 1e-16 / h ≈ 1e-11 relative, for rates of order 1 rad/s.
-DIFFERENCE_STEP = 1e-5
+#: Time step h (s) of the central differences that give Ġ ν: truncation h⁶/140 times the seventh
+#: derivative (≈ 1e-15 relative for rates up to 7 rad/s), round-off ≈ 2e-16 / h ≈ 2e-13 relative.
+DIFFERENCE_STEP = 1e-3
 _TORQUE_JOINTS = ("revolute", "cylindrical")
 #: Smallest ratio of the least to the largest eigenvalue of the mass matrix on the null space of
 #: G for which the accelerations count as unique.  Measured over 3000 generated mechanisms
 #: (:mod:`harness.generate`): smallest ratio 6.9e-4; a bar free to spin about its own axis gives
 #: exactly 0 (and 3e-12 with an axial moment of 1e-12 kg·m²).
 UNIQUENESS_RATIO = 1e-9
+#: Relative cut-off of the singular values in the KKT least-squares solve.  Redundant joint
+#: equations give singular values at round-off (≈ 1e-16 of the largest); LAPACK's default
+#: cut-off sits right there, so off the constraint manifold a redundant direction flips in and out
+#: of the solution and the accelerations jump (measured: DOP853 stalled at 1e-6 s steps on the
+#: N-four-bar with its branch rows).  Genuine singular values of the scenes are ≥ 1e-6 of the
+#: largest (the assembly refuses a start with condition > 1e6).
+KKT_RCOND = 1e-12
 
 
 class IndeterminateAccelerations(ValueError):
@@ -150,12 +157,35 @@ def _moved(states: BodyStates, h: float) -> BodyStates:
                       states.angular_velocity)
 
 
-def _gamma(equations: JointEquations, states: BodyStates) -> np.ndarray:
-    """γ = −Ġ ν, shape (m,), by a central difference of the velocity residuals."""
-    ahead, behind = (_moved(states, sign * DIFFERENCE_STEP) for sign in (1.0, -1.0))
-    rates = [equations.velocity_residuals(s.position, s.quaternion, s.velocity,
-                                          s.angular_velocity) for s in (ahead, behind)]
-    return -(rates[0] - rates[1]) / (2.0 * DIFFERENCE_STEP)
+def gamma(equations: JointEquations, states: BodyStates) -> np.ndarray:
+    """γ = −Ġ ν, shape (m,): the sixth-order central difference of the velocity residuals along
+    the motion, Ġ ν ≈ [45 D(h) − 9 D(2h) + D(3h)] / (60 h) with D(kh) = r(kh) − r(−kh)."""
+    def difference(k: int) -> np.ndarray:
+        ahead, behind = (_moved(states, sign * k * DIFFERENCE_STEP) for sign in (1.0, -1.0))
+        rates = [equations.velocity_residuals(s.position, s.quaternion, s.velocity,
+                                              s.angular_velocity) for s in (ahead, behind)]
+        return rates[0] - rates[1]
+
+    return -(45.0 * difference(1) - 9.0 * difference(2) + difference(3)) / (60.0 * DIFFERENCE_STEP)
+
+
+def twist_mass_and_forces(mech: Mechanism, states: BodyStates) -> tuple[np.ndarray, np.ndarray]:
+    """Mass matrix M, shape (n, n), and applied forces minus gyroscopic terms Q − [0; ω × J ω],
+    shape (n,), in the twist coordinates of the joint equations' Jacobian (n = 6·n_bodies
+    spatial [v, ω]; 3·n_bodies planar [v_x, v_y, ω_z]); kg, kg·m², N, N·m."""
+    rotations = body_rotations(states.quaternion)
+    inertia = _world_inertias(mech, rotations)
+    wrench = applied_wrenches(mech, states)
+    omega = np.asarray(states.angular_velocity, dtype=float)
+    wrench[:, 1] -= np.cross(omega, np.einsum("bij,bj->bi", inertia, omega))
+    masses = mech.masses
+    if mech.planar:
+        blocks = [np.diag([m, m, j[2, 2]]) for m, j in zip(masses, inertia)]
+        rhs = wrench.reshape(-1, 6)[:, [0, 1, 5]].ravel()
+    else:
+        blocks = [scipy.linalg.block_diag(m * np.eye(3), j) for m, j in zip(masses, inertia)]
+        rhs = wrench.reshape(-1).copy()
+    return scipy.linalg.block_diag(*blocks), rhs
 
 
 def _check_unique(mech: Mechanism, mass: np.ndarray, jacobian: np.ndarray) -> None:
@@ -176,7 +206,8 @@ def _check_unique(mech: Mechanism, mass: np.ndarray, jacobian: np.ndarray) -> No
         f"turn about its axis?)")
 
 
-def accelerations(mech: Mechanism, states: BodyStates) -> Accelerations:
+def accelerations(mech: Mechanism, states: BodyStates, equations=None,
+                  baumgarte: tuple[float, float] | None = None) -> Accelerations:
     """Body accelerations of ``mech`` at the consistent state ``states`` (index-1 KKT solve).
 
     Parameters
@@ -185,6 +216,13 @@ def accelerations(mech: Mechanism, states: BodyStates) -> Accelerations:
     states : BodyStates
         Positions, orientations and velocities satisfying the joint equations (their velocity
         residuals are assumed zero; the driver is free, not prescribed).
+    equations : optional
+        The constraint rows: default ``JointEquations(mech)``; any object with its ``jacobian``
+        and ``velocity_residuals`` (e.g. with a branch's rows, :mod:`harness.branch_route`).
+    baumgarte : (α, β), optional
+        Baumgarte's stabilisation, 1/s: the acceleration rows become G ν̇ = γ − 2α Φ̇ − β² Φ, so
+        a state slightly off the constraints is pulled back instead of drifting (needs the
+        equations' ``residuals``); default none (the state is assumed consistent).
 
     Returns
     -------
@@ -197,26 +235,20 @@ def accelerations(mech: Mechanism, states: BodyStates) -> Accelerations:
         If the accelerations are not unique (see the module docstring); the message names the
         body that moves most in the undetermined motion.
     """
-    rotations = body_rotations(states.quaternion)
-    inertia = _world_inertias(mech, rotations)
-    wrench = applied_wrenches(mech, states)
-    omega = np.asarray(states.angular_velocity, dtype=float)
-    wrench[:, 1] -= np.cross(omega, np.einsum("bij,bj->bi", inertia, omega))
-    equations = JointEquations(mech)
+    mass, rhs = twist_mass_and_forces(mech, states)
+    equations = JointEquations(mech) if equations is None else equations
     jacobian = equations.jacobian(states.position, states.quaternion)
-    masses = mech.masses
-    if mech.planar:
-        blocks = [np.diag([m, m, j[2, 2]]) for m, j in zip(masses, inertia)]
-        rhs = wrench.reshape(-1, 6)[:, [0, 1, 5]].ravel()
-    else:
-        blocks = [scipy.linalg.block_diag(m * np.eye(3), j) for m, j in zip(masses, inertia)]
-        rhs = wrench.reshape(-1).copy()
-    mass = scipy.linalg.block_diag(*blocks)
     _check_unique(mech, mass, jacobian)
     n, m = mass.shape[0], jacobian.shape[0]
     kkt = np.block([[mass, jacobian.T], [jacobian, np.zeros((m, m))]])
-    solution = scipy.linalg.lstsq(kkt, np.concatenate([rhs, _gamma(equations, states)]),
-                                  lapack_driver="gelsd")[0]
+    rows = gamma(equations, states)
+    if baumgarte is not None:
+        alpha, beta = baumgarte
+        rows = rows - 2.0 * alpha * equations.velocity_residuals(
+            states.position, states.quaternion, states.velocity, states.angular_velocity) \
+            - beta ** 2 * equations.residuals(states.position, states.quaternion)
+    solution = scipy.linalg.lstsq(kkt, np.concatenate([rhs, rows]),
+                                  cond=KKT_RCOND, lapack_driver="gelsd")[0]
     twist_rates = solution[:n].reshape(len(mech.bodies), -1)
     if mech.planar:
         zeros = np.zeros(len(mech.bodies))

@@ -54,6 +54,10 @@ File format (all SI; angles in degrees only where the key says ``_deg``)::
     components = ["x"]            # optional, default all three (planar: x and y); the others
                                   # are left to the constraints
 
+    [reference]                   # optional: what the reference routes may assume
+    equal_joint_angles = [["O1", "O2"], ["O1", "O3"]]   # joints that turn by equal angles on the
+                                  # assembly branch the motion stays on (harness/branch_route.py)
+
     [outputs]
     crank_angle = { kind = "joint_angle", joint = "O" }
     slider_x = { kind = "position", body = "slider", component = "x" }
@@ -123,7 +127,7 @@ from harness.model import (
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
 _TOP_KEYS = {"name", "kind", "plane", "duration", "gravity", "tags", "notes", "bodies", "joints",
-             "forces", "initial", "outputs"}
+             "forces", "initial", "outputs", "reference"}
 _BODY_KEYS = {"name", "mass", "inertia", "position", "angle_deg", "euler313_deg", "quaternion"}
 _JOINT_KEYS = {"name", "type", "body1", "body2", "location", "location2", "axis", "axis2", "normal"}
 _FORCE_KEYS = {
@@ -412,13 +416,14 @@ class _Builder:
         forces = self._forces()
         initial = self._initial()
         outputs = self._outputs()
+        branch = self._reference()
         if c.problems:
             raise ScenarioError(c.problems)
         return Mechanism(
             name=name, kind=kind, bodies=tuple(self.bodies.values()),
             joints=tuple(self.joints.values()), forces=tuple(forces), gravity=gravity,
             initial=initial, duration=duration, outputs=tuple(outputs), tags=tuple(tags),
-            notes=notes, source=c.file, content_hash=_hash(doc),
+            notes=notes, source=c.file, content_hash=_hash(doc), branch=branch,
         )
 
     # -- sections -------------------------------------------------------------------------
@@ -683,6 +688,46 @@ class _Builder:
         if _missing(driver, value, rate, prescribed):
             return None
         return InitialState(driver, value, rate, guess, prescribed)
+
+    def _reference(self) -> tuple[tuple[str, str], ...]:
+        """The ``[reference]`` table: pairs of revolute or cylindrical joints that turn by equal
+        angles on the motion's assembly branch."""
+        c = self.c
+        table = self.doc.get("reference", {})
+        if not isinstance(table, dict):
+            c.add("reference", "expected a table")
+            return ()
+        c.unknown_keys(table, {"equal_joint_angles"}, "reference")
+        pairs = table.get("equal_joint_angles", [])
+        field = "reference.equal_joint_angles"
+        if not isinstance(pairs, list):
+            c.add(field, f"expected a list of joint-name pairs, got {pairs!r}")
+            return ()
+        branch = []
+        for index, pair in enumerate(pairs):
+            path = f"{field}[{index}]"
+            if not (isinstance(pair, list) and len(pair) == 2
+                    and all(isinstance(n, str) for n in pair)):
+                c.add(path, f"expected a pair of joint names, got {pair!r}")
+                continue
+            if pair[0] == pair[1]:
+                c.add(path, f"a joint paired with itself ({pair[0]!r})")
+                continue
+            known = [self._angle_joint(name, path) for name in pair]
+            if all(known):
+                branch.append((pair[0], pair[1]))
+        return tuple(branch)
+
+    def _angle_joint(self, name: str, path: str) -> bool:
+        """Whether ``name`` is a known revolute or cylindrical joint (records a problem if not)."""
+        if name not in self.joints:
+            self.c.add(path, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
+            return False
+        joint = self.joints[name]
+        if joint is not None and joint.type not in ("revolute", "cylindrical"):
+            self.c.add(path, f"joint {name!r} is {joint.type}, which has no angle")
+            return False
+        return joint is not None
 
     def _drivable_joint(self, table: dict, key: str, path: str) -> str | None:
         """The joint named by ``table[key]`` if it exists and has a single coordinate."""

@@ -12,35 +12,22 @@ unit bars (m = 1 kg, L = 1 m):
 
 so 3 φ̈ = −3.5 g cos φ, and the first crank's tip is (cos φ, sin φ).
 
-No verified reference ships for this scene yet: the reference builder's two routes disagree
-through the singular passages (see the closing note of issue "Trust 2"), so the scene is checked
-here against the reduced model through the in-house ``rk4+direct`` at Δt = 1e-3, the step where
-that method is accurate (it loses accuracy at smaller steps, which is what is left to fix).
+The full model is checked here against that model through the in-house ``rk4+direct`` at
+Δt = 1e-3, a step where that method is accurate (it loses accuracy at smaller steps near the
+singular passages, issue "Hard scenes"); the verified reference, built along the declared branch,
+is checked against it in ``tests/test_branch_route.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy.integrate import solve_ivp
+from conftest import reduced_tip
 
 from adapters import get_adapter
 from harness import scenario
 from harness.outputs import output_series
 from harness.reference import reference_grid
-
-GRAVITY = 9.81
-
-
-def reduced_tip(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Tip (x, y) of the first crank from the one-degree-of-freedom model, shape (n,) each, m."""
-    def rhs(_t, state):
-        return [state[1], -(3.5 / 3.0) * GRAVITY * np.cos(state[0])]
-
-    solution = solve_ivp(rhs, (0.0, times[-1]), [np.pi / 2, -1.0], method="DOP853",
-                         rtol=1e-13, atol=1e-13, t_eval=times)
-    return np.cos(solution.y[0]), np.sin(solution.y[0])
-
 
 @pytest.fixture(scope="module")
 def mech():
