@@ -205,6 +205,132 @@ def cmd_seed_table(args) -> int:
     return 0
 
 
+def _results_root(args):
+    from pathlib import Path
+
+    return Path(args.root) if args.root else None
+
+
+def _open_run(run_id: str, root):
+    from harness.store import RunStore
+
+    try:
+        return RunStore.open(run_id, root)
+    except (FileNotFoundError, ValueError) as error:  # no such run, or an unreadable manifest
+        raise UserError(str(error)) from None
+
+
+def _records(frame) -> list[dict]:
+    """Rows of ``frame`` as dicts of plain values (a missing value of a nullable column: None)."""
+    import pandas as pd
+
+    return [{key: None if value is pd.NA else value for key, value in row.items()}
+            for row in frame.to_dict("records")]
+
+
+def _cell(value) -> str:
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
+
+
+def _status_counts(frame) -> str:
+    counts = frame["status"].value_counts() if len(frame) else {}
+    return ", ".join(f"{status} {count}" for status, count in sorted(dict(counts).items()))
+
+
+def cmd_run(args) -> int:
+    """Run a campaign into the result store (see :mod:`harness.runner`)."""
+    from harness.campaign import CampaignError, load_campaign
+    from harness.runner import CampaignInterrupted, RunnerError, run_campaign
+
+    try:
+        campaign = load_campaign(args.campaign)
+    except CampaignError as error:
+        raise UserError(str(error)) from None
+    try:
+        store = run_campaign(campaign, workers=args.workers, scheduler=args.scheduler,
+                             resume=args.resume, reuse=args.reuse, root=_results_root(args),
+                             quiet=args.quiet)
+    except RunnerError as error:
+        raise UserError(str(error)) from None
+    except CampaignInterrupted as stop:  # before KeyboardInterrupt: it is one
+        cases = stop.store.cases()
+        print(f"mbh: interrupted; run {stop.store.run_id} keeps {len(cases)} finished cases "
+              f"({_status_counts(cases)}); complete it with: mbh run {args.campaign} --resume "
+              f"{stop.store.run_id}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print("mbh: interrupted before the run started; nothing was stored", file=sys.stderr)
+        return 130
+    cases = store.cases()
+    print(f"run {store.run_id}: {store.manifest['status']}, {len(cases)} cases "
+          f"({_status_counts(cases)})")
+    print(f"path {store.path}")
+    return 0
+
+
+def cmd_runs(args) -> int:
+    from harness.store import list_runs
+
+    try:
+        manifests = list_runs(_results_root(args))
+    except ValueError as error:  # an unreadable manifest
+        raise UserError(str(error)) from None
+    rows = [{"run_id": m["run_id"], "campaign": m["campaign"], "status": m["status"],
+             "started": m["started"], "ended": m["ended"], "n_cases": m["n_cases"],
+             "calibration_s": m.get("calibration_s"), "git_commit": (m.get("git") or {}).get("commit"),
+             "git_dirty": (m.get("git") or {}).get("dirty")} for m in manifests]
+    if args.json:
+        _print_json(rows)
+    elif rows:
+        _print_table(rows, ["run_id", "campaign", "status", "started", "ended", "n_cases"])
+    else:
+        print("no runs")
+    return 0
+
+
+#: Columns of ``mbh show`` without --json (the JSON form has them all).
+SHOW_COLUMNS = ["case_id", "status", "failure_time", "main_output_error", "wall_time_s", "reason"]
+
+
+def cmd_show(args) -> int:
+    store = _open_run(args.run, _results_root(args))
+    cases = store.cases()
+    if args.where:
+        try:
+            cases = cases.query(args.where)
+        except Exception as error:  # noqa: BLE001 — any failure of the user's expression
+            raise UserError(f"--where {args.where!r}: {type(error).__name__}: {error}; give a "
+                            f"pandas DataFrame.query expression over the columns "
+                            f"{', '.join(store.cases().columns)}") from None
+    if args.json:
+        _print_json(_records(cases))
+        return 0
+    rows = [{c: _cell(row.get(c))[:60] for c in SHOW_COLUMNS} for row in _records(cases)]
+    if rows:
+        _print_table(rows, SHOW_COLUMNS)
+    print(f"{len(rows)} cases of run {store.run_id} ({store.manifest['status']})")
+    return 0
+
+
+def cmd_compare(args) -> int:
+    from harness.store import compare_runs
+
+    root = _results_root(args)
+    a, b = _open_run(args.run_a, root), _open_run(args.run_b, root)
+    changes = compare_runs(a.cases(), b.cases(), a.calibration_s, b.calibration_s)
+    if args.json:
+        _print_json(_records(changes))
+        return 0
+    columns = ["case_id", "change", "status_a", "status_b", "error_ratio", "time_ratio"]
+    rows = [{c: _cell(row[c]) for c in columns} for row in _records(changes)]
+    if rows:
+        _print_table(rows, columns)
+    counts = changes["change"].value_counts()
+    print(f"{len(rows)} cases in both runs: "
+          + ", ".join(f"{change} {count}" for change, count in counts.items()))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mbh", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -246,7 +372,50 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--adapter", default="mujoco")
     p.add_argument("--output", "-o", default=None)
     p.set_defaults(func=cmd_export)
+
+    root_help = "results root (default: $MBH_RESULTS_DIR or <repository>/results)"
+    p = sub.add_parser("run", help="run a campaign into the result store")
+    p.add_argument("campaign", help="campaign name (campaigns/NAME.toml) or file")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="local worker processes (default and maximum: the cores)")
+    p.add_argument("--scheduler", default=None, help="Dask scheduler address, tcp://HOST:PORT")
+    p.add_argument("--resume", default=None, metavar="RUN", help="complete interrupted run RUN")
+    p.add_argument("--reuse", action="store_true", help="copy identical cases from the cache")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no notes")
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("runs", help="list the stored runs, oldest first")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_runs)
+
+    p = sub.add_parser("show", help="a stored run's cases, one row each")
+    p.add_argument("run")
+    p.add_argument("--where", default=None, help="pandas DataFrame.query expression, e.g. "
+                   "\"status != 'ok' and adapter == 'mujoco'\"")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_show)
+
+    p = sub.add_parser("compare", help="what changed between two runs (accuracy, calibrated "
+                       "speed, failing/passing)")
+    p.add_argument("run_a")
+    p.add_argument("run_b")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_compare)
     return parser
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number of at least 1, got {text!r}")
+    return value
 
 
 def main(argv=None) -> int:

@@ -1,0 +1,117 @@
+"""The executor (harness.execute): one fresh process per case; a hang, a kill, a segfault or an
+exception in a case becomes that case's row, the other cases still run, and an interrupt kills the
+running workers.  Driven by a toy work function (defined here, run in the worker processes)."""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import time
+from dataclasses import dataclass
+
+import pytest
+
+from harness.execute import WORKER_ENV, execute
+
+
+@dataclass(frozen=True)
+class ToySpec:
+    """What the executor needs of a spec: a name for the toy work and a timeout."""
+
+    name: str
+    timeout_s: float = 30.0
+    pid_file: str = ""
+
+
+def toy_work(spec: ToySpec):
+    """Misbehave as the spec's name says, else return a row with the worker's thread settings."""
+    if spec.pid_file:
+        with open(spec.pid_file, "w") as handle:
+            handle.write(str(os.getpid()))
+    if spec.name.startswith("sigkill"):
+        os.kill(os.getpid(), signal.SIGKILL)
+    if spec.name.startswith("sleep"):
+        time.sleep(600)
+    if spec.name.startswith("memory"):
+        raise MemoryError("toy allocation failed")
+    if spec.name.startswith("segfault"):
+        ctypes.string_at(0)
+    if spec.name.startswith("exit"):
+        os._exit(3)
+    print("engine chatter on stdout")
+    return {"name": spec.name, "status": "ok", **{k: os.environ.get(k) for k in WORKER_ENV}}, None
+
+
+def toy_failure_row(spec: ToySpec, status: str, reason: str) -> dict:
+    return {"name": spec.name, "status": status, "reason": reason}
+
+
+def run_toys(specs, **options) -> dict[str, dict]:
+    rows = {}
+    execute(specs, toy_work, failure_row=toy_failure_row, progress=False,
+            on_result=lambda spec, row, trajectory: rows.__setitem__(spec.name, row), **options)
+    assert len(rows) == len(specs)
+    return rows
+
+
+MISBEHAVING = [ToySpec("ok-1"), ToySpec("sigkill"), ToySpec("sleep", timeout_s=3.0),
+               ToySpec("memory"), ToySpec("segfault"), ToySpec("exit"), ToySpec("ok-2")]
+
+
+def check_misbehaving_rows(rows: dict[str, dict]) -> None:
+    assert {name: row["status"] for name, row in rows.items()} == {
+        "ok-1": "ok", "sigkill": "crashed", "sleep": "timeout", "memory": "crashed",
+        "segfault": "crashed", "exit": "crashed", "ok-2": "ok"}
+    assert rows["sigkill"]["reason"].startswith("worker process killed by SIGKILL")
+    assert rows["segfault"]["reason"].startswith("worker process killed by SIGSEGV")
+    assert "Segmentation fault" in rows["segfault"]["reason"]  # faulthandler's report is kept
+    assert rows["memory"]["reason"].startswith("worker raised MemoryError: toy allocation failed")
+    assert rows["exit"]["reason"].startswith("worker process exited with code 3")
+    assert "timeout of 3 s" in rows["sleep"]["reason"]
+    for name in ("ok-1", "ok-2"):
+        assert all(rows[name][key] == "1" for key in WORKER_ENV)
+
+
+def test_local_pool_turns_every_failure_into_a_row():
+    check_misbehaving_rows(run_toys(MISBEHAVING, workers=2))
+
+
+def test_one_worker_runs_every_case_after_failures():
+    rows = run_toys([ToySpec("sigkill"), ToySpec("memory"), ToySpec("ok")], workers=1)
+    assert [rows[name]["status"] for name in ("sigkill", "memory", "ok")] == \
+        ["crashed", "crashed", "ok"]
+
+
+def test_timeout_argument_overrides_the_specs_own():
+    rows = run_toys([ToySpec("sleep", timeout_s=600.0)], workers=1, timeout_s=2.0)
+    assert rows["sleep"]["status"] == "timeout"
+
+
+def test_dask_local_cluster_turns_every_failure_into_a_row():
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  host="127.0.0.1", dashboard_address=":0") as cluster:
+        check_misbehaving_rows(run_toys(MISBEHAVING, scheduler=cluster.scheduler_address))
+
+
+def test_interrupt_kills_the_running_workers(tmp_path):
+    sleepers = [ToySpec(f"sleep-{i}", pid_file=str(tmp_path / f"{i}.pid")) for i in range(2)]
+    stored = []
+
+    def interrupt_after_first(spec, row, trajectory):
+        stored.append(spec.name)
+        for _ in range(600):  # both sleepers are inside their case (pid written) before Ctrl-C
+            if all(os.path.exists(sleeper.pid_file) for sleeper in sleepers):
+                break
+            time.sleep(0.1)
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        execute([*sleepers, ToySpec("ok")], toy_work, workers=3, failure_row=toy_failure_row,
+                progress=False, on_result=interrupt_after_first)
+    assert stored == ["ok"]
+    for sleeper in sleepers:
+        pid = int(open(sleeper.pid_file).read())
+        with pytest.raises(ProcessLookupError):  # killed and reaped, not left running
+            os.kill(pid, 0)
