@@ -90,7 +90,9 @@ class ExudynAdapter(Adapter):
         with _quiet():
             system = ExudynSystem(model.mechanism, "ep")
             solver = exu.MainSolverImplicitSecondOrder()
-            solver.InitializeSolver(system.mbs, exu.SimulationSettings())
+            settings = exu.SimulationSettings()
+            settings.solution.file.write = False  # else solution/ appears in the working folder
+            solver.InitializeSolver(system.mbs, settings)
             solver.ComputeJacobianAE(system.mbs, 1.0, 0.0, 0.0, False)
         coordinates, rows = int(solver.GetODE2size()), int(solver.GetAEsize())
         rank = int(np.linalg.matrix_rank(solver.GetSystemJacobian()[coordinates:, :coordinates]))
