@@ -13,8 +13,25 @@ $(STAMP): pyproject.toml
 	$(BIN)/python -m pip install --quiet -e ".[test]"
 	touch $(STAMP)
 
+# `make report`: run the nightly campaign (`make report QUICK=1`: the smoke campaign), store the
+# seed's comparison table beside the run (seed_table.json), build the HTML and PDF reports into
+# reports/<run-id>/ against the previous run of the same campaign (if any), point reports/latest at
+# them (a copy where symlinks fail) and print the HTML file's path last.
+REPORT_CAMPAIGN = $(if $(QUICK),smoke,nightly)
+SEED_REPEATS = $(if $(QUICK),1,3)
+
 report: $(STAMP)
-	$(BIN)/mbh check --all
+	@set -e; \
+	ran=$$($(BIN)/mbh run $(REPORT_CAMPAIGN)); echo "$$ran"; \
+	run=$$(printf '%s\n' "$$ran" | sed -n 's/^run \([^:]*\):.*/\1/p'); \
+	folder=$$(printf '%s\n' "$$ran" | sed -n 's/^path //p'); \
+	test -n "$$run" && test -d "$$folder" || { echo "make report: no run id in mbh run's output" >&2; exit 1; }; \
+	$(BIN)/mbh seed-table --json --repeats $(SEED_REPEATS) > "$$folder/.seed_table.json.tmp"; \
+	mv "$$folder/.seed_table.json.tmp" "$$folder/seed_table.json"; \
+	$(BIN)/mbh report "$$run" --against previous --format html,pdf --out "reports/$$run" >/dev/null; \
+	rm -rf reports/latest; \
+	ln -s "$$run" reports/latest 2>/dev/null || cp -R "reports/$$run" reports/latest; \
+	echo "$(CURDIR)/reports/$$run/report.html"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

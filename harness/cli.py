@@ -331,6 +331,21 @@ def cmd_compare(args) -> int:
     return 0
 
 
+def cmd_report(args) -> int:
+    """Build a stored run's report (HTML and/or PDF, see :mod:`harness.report.build`); print the
+    paths written, the HTML last."""
+    from harness.report.build import ReportError, build_report, parse_formats
+
+    try:
+        written = build_report(args.run, against=args.against, formats=parse_formats(args.format),
+                               out=args.out, root=_results_root(args))
+    except ReportError as error:
+        raise UserError(str(error)) from None
+    for path in sorted(written.values(), key=lambda p: p.suffix == ".html"):
+        print(path)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mbh", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -405,6 +420,16 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_compare)
+
+    p = sub.add_parser("report", help="build a stored run's report (HTML and PDF); never re-runs")
+    p.add_argument("run")
+    p.add_argument("--against", default=None, metavar="PREV",
+                   help="previous run to compare with; 'previous' = the latest earlier run of "
+                        "the same campaign (none if there is none)")
+    p.add_argument("--format", default="html,pdf", help="html, pdf or html,pdf (default)")
+    p.add_argument("--out", default=None, help="output folder (default: reports/RUN/)")
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_report)
     return parser
 
 
