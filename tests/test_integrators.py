@@ -189,6 +189,29 @@ def test_an_exception_from_the_problem_is_a_failure_with_its_reason(name):
     assert integrator.step() == FAILED
 
 
+class SquareRootEnd(SecondOrderSystem):
+    """q̈ = −1 / (4 q³) from q = 1, q̇ = −1/2: q = √(1 − t), whose rates are infinite at t = 1
+    while q stays bounded (no divergence to stop the run first)."""
+
+    n = 1
+
+    def acceleration(self, t, q, v):
+        return -0.25 / q ** 3
+
+
+@pytest.mark.parametrize("name", ["rk45", "dop853", "radau"])
+def test_a_collapsing_adaptive_step_stops_the_run_at_once(name):
+    integrator = make_integrator(name, SquareRootEnd(), 0.0, [1.0], [-0.5], 1e-3, rtol=1e-10,
+                                 atol=1e-12)
+    run_steps(integrator, 5000)
+    assert integrator.status == FAILED
+    assert "step-size collapse" in integrator.failure_reason
+    # The steps shrink with the distance to t = 1 and fall below 1e-5 · dt = 1e-8 s just before
+    # it; the run stops there instead of crawling on.
+    assert 0.99 < integrator.failure_time < 1.0
+    assert integrator.n_steps < 5000
+
+
 def test_newton_that_cannot_converge_is_a_failure():
     # One iteration cannot reach tol = 1e-12 on the pendulum (first correction ~1e-3).
     integrator = run_steps(make_integrator("bdf2", DampedPendulum(), 0.0, Q0, V0, 0.1,
@@ -331,5 +354,5 @@ def test_parameter_listing_and_step_kind():
     assert integrator_params("bdf4") == {"divergence_limit": 1e8, "tol": 1e-5, "max_iter": 10}
     assert integrator_params("am3")["tol"] == 1e-10
     assert integrator_params("rk45") == {"divergence_limit": 1e8, "rtol": 1e-6, "atol": 1e-9,
-                                         "max_step": np.inf}
+                                         "max_step": np.inf, "min_step_ratio": 1e-5}
     assert [is_adaptive(name) for name in ("rk4", "bdf4", "lsoda")] == [False, False, True]
