@@ -346,6 +346,29 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_nightly(args) -> int:
+    """Run a campaign, compare it with its previous run, report, and gate on regressions (see
+    :mod:`harness.nightly`); prints the Markdown summary; exit 1 on a regression."""
+    from harness.campaign import CampaignError
+    from harness.nightly import nightly
+    from harness.runner import CampaignInterrupted, RunnerError
+
+    try:
+        outcome = nightly(args.campaign, root=_results_root(args), workers=args.workers,
+                          error_factor=args.error_factor, time_factor=args.time_factor,
+                          summary_path=args.summary,
+                          formats=() if args.no_report else ("html", "pdf"), quiet=args.quiet)
+    except (CampaignError, RunnerError, ValueError) as error:
+        raise UserError(str(error)) from None
+    except CampaignInterrupted as stop:
+        print(f"mbh: interrupted; run {stop.store.run_id} is stored incomplete, nothing was "
+              f"compared", file=sys.stderr)
+        return 130
+    print(outcome.summary, end="")
+    print(f"summary {outcome.summary_path}")
+    return outcome.exit_code
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="mbh", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True)
@@ -430,6 +453,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="output folder (default: reports/RUN/)")
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_report)
+
+    from harness.nightly import DEFAULT_CAMPAIGN, ERROR_FACTOR, TIME_FACTOR
+
+    p = sub.add_parser("nightly", help="run a campaign, compare it with its previous run, build "
+                       "its report; exit 1 on a regression")
+    p.add_argument("--campaign", default=DEFAULT_CAMPAIGN,
+                   help=f"campaign name or file (default: {DEFAULT_CAMPAIGN})")
+    p.add_argument("--root", default=None, help=root_help)
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="local worker processes (default and maximum: the cores)")
+    p.add_argument("--error-factor", type=float, default=ERROR_FACTOR,
+                   help="regression: main-output error more than this many times the previous "
+                        "run's (default %(default)g)")
+    p.add_argument("--time-factor", type=float, default=TIME_FACTOR,
+                   help="regression: calibrated wall time more than this many times the "
+                        "previous run's (default %(default)g)")
+    p.add_argument("--summary", default=None, metavar="PATH",
+                   help="Markdown summary file (default: <run folder>/nightly_summary.md)")
+    p.add_argument("--no-report", action="store_true", help="skip the HTML/PDF report")
+    p.add_argument("--quiet", action="store_true", help="no progress bar, no notes")
+    p.set_defaults(func=cmd_nightly)
     return parser
 
 
