@@ -313,7 +313,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from harness.store import compare_runs
+    from harness.run_compare import compare_runs
 
     root = _results_root(args)
     a, b = _open_run(args.run_a, root), _open_run(args.run_b, root)

@@ -7,7 +7,7 @@ Steps of :func:`nightly`:
    root, looked up before this run starts;
 2. the campaign runs into the store (:func:`harness.runner.run_campaign`, calibration case
    included);
-3. the two runs are compared case by case (:func:`harness.store.compare_runs`: errors as ratios,
+3. the two runs are compared case by case (:func:`harness.run_compare.compare_runs`: errors as ratios,
    wall times as ratios of calibrated times, i.e. each divided by its own run's calibration case);
 4. the reports are built into ``<run folder>/report/`` when :mod:`harness.report.build` is
    installed (otherwise the step is skipped with a note);
@@ -34,7 +34,8 @@ import pandas as pd
 
 from harness.campaign import load_campaign
 from harness.runner import CaseWork, run_campaign
-from harness.store import RunStore, compare_runs, list_runs
+from harness.run_compare import compare_runs
+from harness.store import RunStore, list_runs
 
 #: Default campaign of ``mbh nightly``.
 DEFAULT_CAMPAIGN = "nightly"
@@ -42,7 +43,7 @@ DEFAULT_CAMPAIGN = "nightly"
 ERROR_FACTOR = 10.0
 #: Default threshold: an ``ok`` case whose calibrated wall time grew more than this many times.
 TIME_FACTOR = 2.0
-#: Change classes of :func:`harness.store.compare_runs` that are regressions.
+#: Change classes of :func:`harness.run_compare.compare_runs` that are regressions.
 REGRESSIONS = ("newly failing", "less accurate", "slower")
 #: Change classes reported as improvements in the summary.
 IMPROVEMENTS = ("newly passing", "more accurate", "faster")
@@ -72,7 +73,7 @@ class NightlyOutcome:
     previous : str or None
         Run id compared against (None: no earlier complete run of the campaign).
     changes : DataFrame
-        :func:`harness.store.compare_runs` of the previous run → this one (empty without one).
+        :func:`harness.run_compare.compare_runs` of the previous run → this one (empty without one).
     reports : dict
         Format → path written; empty when the report step was skipped or failed.
     report_note : str
@@ -103,7 +104,7 @@ class NightlyOutcome:
 
 
 def regressions_of(changes: pd.DataFrame) -> pd.DataFrame:
-    """The rows of a :func:`harness.store.compare_runs` table that are :data:`REGRESSIONS`."""
+    """The rows of a :func:`harness.run_compare.compare_runs` table that are :data:`REGRESSIONS`."""
     return changes[changes["change"].isin(REGRESSIONS)]
 
 

@@ -29,13 +29,10 @@ from __future__ import annotations
 
 import datetime as _dt
 import hashlib
-import importlib.metadata
 import json
 import os
-import platform
 import re
 import shutil
-import subprocess
 import threading
 from pathlib import Path
 
@@ -45,26 +42,19 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from harness import jsonout, scenario
+from harness.environment import git_state, machine, package_versions
 from harness.store_schema import (CASE_COLUMNS, SCHEMA_VERSION, SWEEP_COLUMNS, VERSION_KEY,
                                   column_type, migrate_manifest, migrate_table)
 from harness.trajectory import Trajectory
 
 __all__ = ["SCHEMA_VERSION", "results_root", "RunStore", "list_runs", "load_run", "CaseCache",
-           "compare_runs", "RUN_STATUSES", "CHANGES"]
+           "RUN_STATUSES"]
 
 #: Environment variable naming the results root.
 ROOT_ENV = "MBH_RESULTS_DIR"
 
 #: A run's ``status`` in its manifest.
 RUN_STATUSES = ("running", "complete", "interrupted")
-
-#: Packages whose versions every manifest records.
-RECORDED_PACKAGES = ("numpy", "scipy", "pandas", "pyarrow", "mujoco", "pin", "exudyn",
-                     "pybullet", "scikit-sundae", "numba")
-
-#: Change classes of :func:`compare_runs`, in the order they are decided.
-CHANGES = ("newly failing", "newly passing", "less accurate", "more accurate", "slower",
-           "faster", "unchanged")
 
 #: Statuses the cache never keeps: they describe the machine's load, not the case.
 UNCACHED_STATUSES = ("timeout", "crashed")
@@ -290,53 +280,6 @@ def _trajectory_name(case_id: str) -> str:
     """A file name for ``case_id``: readable part plus a hash (unique, filesystem-safe)."""
     readable = re.sub(r"[^A-Za-z0-9._=-]+", "_", case_id)[:100]
     return f"{readable}-{hashlib.sha256(case_id.encode()).hexdigest()[:12]}.npz"
-
-
-# --- manifest facts -------------------------------------------------------------------------
-
-def _git(*args: str) -> str | None:
-    try:
-        done = subprocess.run(["git", "-C", str(_REPO), *args], capture_output=True, text=True,
-                              timeout=30, check=False)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return done.stdout if done.returncode == 0 else None
-
-
-def git_state() -> dict:
-    """``{"commit": sha or None, "dirty": bool or None}`` of the repository (None: no git)."""
-    commit = _git("rev-parse", "HEAD")
-    status = _git("status", "--porcelain", "--untracked-files=no")
-    return {"commit": commit.strip() if commit else None,
-            "dirty": None if status is None else bool(status.strip())}
-
-
-def package_versions() -> dict[str, str | None]:
-    """Installed version of each of :data:`RECORDED_PACKAGES` (None when not installed)."""
-    versions = {}
-    for name in RECORDED_PACKAGES:
-        try:
-            versions[name] = importlib.metadata.version(name)
-        except importlib.metadata.PackageNotFoundError:
-            versions[name] = None
-    return versions
-
-
-def _cpu_model() -> str:
-    try:
-        text = Path("/proc/cpuinfo").read_text(encoding="utf-8", errors="replace")
-    except OSError:
-        return platform.processor()
-    found = re.search(r"^model name\s*:\s*(.+)$", text, re.MULTILINE)
-    return found.group(1).strip() if found else platform.processor()
-
-
-def machine() -> dict:
-    """Platform, CPU model and count, Python version and host of this machine."""
-    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else None
-    return {"platform": platform.platform(), "machine": platform.machine(),
-            "processor": _cpu_model(), "cpu_count": os.cpu_count(), "usable_cpus": usable,
-            "python": platform.python_version(), "node": platform.node()}
 
 
 # --- runs -----------------------------------------------------------------------------------
@@ -595,82 +538,3 @@ class CaseCache:
                     raise
         finally:
             shutil.rmtree(temp, ignore_errors=True)
-
-
-# --- comparison -----------------------------------------------------------------------------
-
-def _ratio(numerator: np.ndarray, denominator: np.ndarray) -> np.ndarray:
-    """numerator / denominator with 0/0 = 1 and x/0 = inf (NaN stays NaN)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = numerator / denominator
-    ratio[(numerator == 0) & (denominator == 0)] = 1.0
-    return ratio
-
-
-def _calibration(value, name: str) -> float:
-    if value is None:
-        return float("nan")
-    value = float(value)
-    if not value > 0:
-        raise ValueError(f"{name} must be a positive time in s (or None), got {value!r}")
-    return value
-
-
-def compare_runs(a: pd.DataFrame, b: pd.DataFrame, calibration_a: float | None,
-                 calibration_b: float | None, error_factor: float = 10.0,
-                 time_factor: float = 1.5, error_floor: float = 0.0) -> pd.DataFrame:
-    """Classify how every case present in both runs changed from run ``a`` to run ``b``.
-
-    Parameters
-    ----------
-    a, b : DataFrame
-        Case rows (:meth:`RunStore.cases`): ``case_id``, ``scenario``, ``adapter``, ``method``,
-        ``dt``, ``status``, ``main_output_error`` (rad or m), ``wall_time_s`` (s).
-    calibration_a, calibration_b : float or None
-        Each run's calibration time, s; None leaves the time ratio NaN.
-    error_factor : float
-        Error ratios above it are "less accurate", below its inverse "more accurate".
-    time_factor : float
-        Calibrated time ratios above it are "slower", below its inverse "faster".
-    error_floor : float
-        Errors below it count as equal to it (rad or m), so round-off-sized errors do not
-        change class; 0 compares errors as they are.
-
-    Returns
-    -------
-    DataFrame
-        One row per common ``case_id`` (in ``a``'s order): ``case_id``, ``scenario``,
-        ``adapter``, ``method``, ``dt``, ``status_a``, ``status_b``, ``main_output_error_a``,
-        ``main_output_error_b``, ``error_ratio`` (b / a), ``wall_time_s_a``,
-        ``wall_time_s_b``, ``time_ratio`` = (time_b / calibration_b) / (time_a /
-        calibration_a), and ``change``, the first of :data:`CHANGES` that applies: a status
-        change from/to ``ok``; for cases ``ok`` in both, the accuracy classes, then the speed
-        classes; else "unchanged".
-    """
-    calib_a = _calibration(calibration_a, "calibration_a")
-    calib_b = _calibration(calibration_b, "calibration_b")
-    keep = ["case_id", "status", "main_output_error", "wall_time_s"]
-    merged = a[["scenario", "adapter", "method", "dt", *keep]].merge(
-        b[keep], on="case_id", how="inner", suffixes=("_a", "_b"))
-    floor = float(error_floor)
-    error_a = np.maximum(merged["main_output_error_a"].to_numpy(float, na_value=np.nan), floor)
-    error_b = np.maximum(merged["main_output_error_b"].to_numpy(float, na_value=np.nan), floor)
-    time_a = merged["wall_time_s_a"].to_numpy(float, na_value=np.nan) / calib_a
-    time_b = merged["wall_time_s_b"].to_numpy(float, na_value=np.nan) / calib_b
-    error_ratio = _ratio(error_b, error_a)
-    time_ratio = _ratio(time_b, time_a)
-    ok_a = (merged["status_a"] == "ok").to_numpy(bool)
-    ok_b = (merged["status_b"] == "ok").to_numpy(bool)
-    both = ok_a & ok_b
-    change = np.select(
-        [ok_a & ~ok_b, ~ok_a & ok_b,
-         both & (error_ratio > error_factor), both & (error_ratio < 1.0 / error_factor),
-         both & (time_ratio > time_factor), both & (time_ratio < 1.0 / time_factor)],
-        CHANGES[:-1], default=CHANGES[-1])
-    columns = ["case_id", "scenario", "adapter", "method", "dt", "status_a", "status_b",
-               "main_output_error_a", "main_output_error_b", "wall_time_s_a", "wall_time_s_b"]
-    result = merged[columns].copy()
-    result.insert(9, "error_ratio", error_ratio)
-    result["time_ratio"] = time_ratio
-    result["change"] = change
-    return result

@@ -8,6 +8,7 @@ The harness itself lives in the ``harness`` and ``adapters`` packages; this pack
 the store's reading functions for users.
 """
 
-from harness.store import RunStore, compare_runs, list_runs, load_run, results_root
+from harness.run_compare import compare_runs
+from harness.store import RunStore, list_runs, load_run, results_root
 
 __all__ = ["RunStore", "compare_runs", "list_runs", "load_run", "results_root"]

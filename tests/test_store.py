@@ -20,7 +20,7 @@ import pyarrow.parquet as pq
 import pytest
 
 import mbh
-from harness import store
+from harness import environment, run_compare, store
 from harness.campaign import load_campaign
 from harness.store_schema import SCHEMA_VERSION, SchemaError
 from harness.trajectory import Trajectory
@@ -224,7 +224,7 @@ def test_manifest_records_the_run(root):
     assert set(manifest["scenario_hashes"]) == {"fourbar", "slider_crank"}
     assert all(len(h) == 64 for h in manifest["scenario_hashes"].values())
     assert manifest["packages"]["numpy"] == np.__version__
-    assert set(manifest["packages"]) == set(store.RECORDED_PACKAGES)
+    assert set(manifest["packages"]) == set(environment.RECORDED_PACKAGES)
     assert manifest["machine"]["cpu_count"] >= 1
     assert set(manifest["git"]) == {"commit", "dirty"}
     assert manifest["calibration_s"] is None
@@ -259,7 +259,7 @@ def test_a_shipped_campaign_makes_a_run(root):
 
 def test_git_state_without_git_is_unknown(monkeypatch):
     monkeypatch.setenv("PATH", "")
-    assert store.git_state() == {"commit": None, "dirty": None}
+    assert environment.git_state() == {"commit": None, "dirty": None}
 
 
 def test_runs_created_in_the_same_second_get_distinct_ids(root):
@@ -472,7 +472,7 @@ def test_compare_runs_classifies_every_change():
          "wall_time_s": 2.0},
         {"case_id": "only in b", "status": "ok", "main_output_error": 1e-6, "wall_time_s": 1.0},
     ])
-    result = store.compare_runs(before, after, 1.0, 2.0).set_index("case_id")
+    result = run_compare.compare_runs(before, after, 1.0, 2.0).set_index("case_id")
     assert result["change"].to_dict() == {
         "fails": "newly failing", "passes": "newly passing", "worse": "less accurate",
         "better": "more accurate", "slower": "slower", "faster": "faster", "same": "unchanged",
@@ -488,12 +488,12 @@ def test_compare_runs_without_calibration_or_below_the_error_floor_is_unchanged(
                         "wall_time_s": 1.0}])
     after = frame_of([{"case_id": "x", "status": "ok", "main_output_error": 1e-12,
                        "wall_time_s": 9.0}])
-    assert store.compare_runs(before, after, 1.0, 1.0)["change"].item() == "less accurate"
-    result = store.compare_runs(before, after, None, 1.0, error_floor=1e-10)
+    assert run_compare.compare_runs(before, after, 1.0, 1.0)["change"].item() == "less accurate"
+    result = run_compare.compare_runs(before, after, None, 1.0, error_floor=1e-10)
     assert result["change"].item() == "unchanged" and np.isnan(result["time_ratio"].item())
     assert result["error_ratio"].item() == 1.0
     with pytest.raises(ValueError, match="calibration_b"):
-        store.compare_runs(before, after, 1.0, 0.0)
+        run_compare.compare_runs(before, after, 1.0, 0.0)
 
 
 def test_compare_runs_reads_stored_runs(root):
@@ -504,7 +504,7 @@ def test_compare_runs_reads_stored_runs(root):
         for spec in SPECS:
             run.add(row_for(spec, wall_time_s=wall), None)
         runs.append(run)
-    result = store.compare_runs(runs[0].cases(), runs[1].cases(), runs[0].calibration_s,
+    result = run_compare.compare_runs(runs[0].cases(), runs[1].cases(), runs[0].calibration_s,
                                 runs[1].calibration_s)
     assert list(result["case_id"]) == [spec.case_id for spec in SPECS]
     assert (result["change"] == "slower").all()

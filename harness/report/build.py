@@ -29,7 +29,8 @@ from harness.reference import ReferenceError, reference_trajectory
 from harness.report import figures, mechanism, seed_compare, summary
 from harness.report.summary import Table
 from harness.scenario import ScenarioError
-from harness.store import RunStore, compare_runs, list_runs
+from harness.run_compare import compare_runs
+from harness.store import RunStore, list_runs
 
 #: Output formats :func:`build_report` writes.
 FORMATS = ("html", "pdf")

@@ -162,7 +162,7 @@ def failures_table(cases: pd.DataFrame) -> Table:
 def changes_table(changes: pd.DataFrame) -> Table:
     """The cases that changed class between the previous run and this one.
 
-    ``changes`` is :func:`harness.store.compare_runs` (previous run as ``a``, this run as ``b``).
+    ``changes`` is :func:`harness.run_compare.compare_runs` (previous run as ``a``, this run as ``b``).
     """
     changed = changes[changes["change"] != "unchanged"]
     counts = changes["change"].value_counts()
