@@ -1,8 +1,8 @@
 """The ``mbh`` pytest plugin (entry point ``pytest11``, registered by installing the package).
 
-Thin wrappers over :mod:`harness.tolerances`:
+Thin wrappers over :mod:`harness.case_runner` and :mod:`harness.tolerances`:
 
-* fixture ``mbh_runner`` (session): a :class:`~harness.tolerances.CaseRunner` whose finished
+* fixture ``mbh_runner`` (session): a :class:`~harness.case_runner.CaseRunner` whose finished
   cases are kept for the whole session; a case of a scenario or adapter not selected on the
   command line is skipped with the reason;
 * fixture ``mbh_reference``: ``mbh_reference("fourbar")`` → the scenario's verified reference
@@ -42,7 +42,7 @@ def pytest_addoption(parser) -> None:
 
 
 def _selection(config):
-    from harness.tolerances import Selection, ToleranceError
+    from harness.case_runner import Selection, ToleranceError
 
     try:
         return Selection.parse(config.getoption("--mbh-scenarios"),
@@ -76,8 +76,8 @@ def pytest_collection_modifyitems(config, items) -> None:
 
 def campaign_params(name_or_path, scenarios=None, adapters=None) -> list:
     """A campaign's cases as ``pytest.param(case, id=label)``
-    (:func:`harness.tolerances.campaign_cases`, same arguments)."""
-    from harness.tolerances import campaign_cases
+    (:func:`harness.case_runner.campaign_cases`, same arguments)."""
+    from harness.case_runner import campaign_cases
 
     return [pytest.param(spec, id=label)
             for label, spec in campaign_cases(name_or_path, scenarios, adapters)]
@@ -99,7 +99,7 @@ class _SelectingRunner:
         return self._runner.run(spec)
 
     def case(self, *args, **kwargs):
-        from harness.tolerances import case_spec
+        from harness.case_runner import case_spec
 
         return self.run(case_spec(*args, **kwargs))
 
@@ -109,9 +109,9 @@ class _SelectingRunner:
 
 @pytest.fixture(scope="session")
 def mbh_runner(request):
-    """The session's :class:`harness.tolerances.CaseRunner` (``run``, ``case``, ``steps``,
+    """The session's :class:`harness.case_runner.CaseRunner` (``run``, ``case``, ``steps``,
     ``reference``, ``calibration_s``)."""
-    from harness.tolerances import CaseRunner
+    from harness.case_runner import CaseRunner
 
     return _SelectingRunner(CaseRunner(), _selection(request.config))
 

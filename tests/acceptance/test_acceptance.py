@@ -14,7 +14,8 @@ from pathlib import Path
 import pytest
 
 from harness.pytest_plugin import campaign_params
-from harness.tolerances import assert_convergence_order, assert_within_tolerance, case_spec
+from harness.case_runner import case_spec
+from harness.tolerances import assert_convergence_order, assert_within_tolerance
 
 CAMPAIGN = Path(__file__).with_name("acceptance.toml")
 
