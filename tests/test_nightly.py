@@ -3,8 +3,10 @@
 The campaign is three cheap four-bar cases (1 s at dt 1e-3 s, three timing repetitions each) in a
 temporary results root.  The regressions are injected by replacing the nightly's work function
 (``harness.nightly.case_work``, pytest ``monkeypatch``) with one that reports one case's error
-1000 times larger and another case's wall time 10 times longer; the adapters have no such switch.
-Measured calibrated time ratios between two plain runs: 0.78–1.2 (threshold 2).  About 30 s.
+1000 times larger and another case's wall time 20 times longer; the adapters have no such switch.
+Measured calibrated time ratios between two plain runs: 0.78–1.2 on an idle machine, up to 2.03
+with a second test session on the same two cores — so the runs here use a time factor of 4
+(the command's default is 2) and the injected slowdown is 20.  About 30 s.
 """
 
 from __future__ import annotations
@@ -32,9 +34,11 @@ dts = [1e-3]
 """
 LESS_ACCURATE = "fourbar|inhouse|rk4+baumgarte|0.001|1.0"
 SLOWER = "fourbar|pinocchio|best|0.001|1.0"
-#: Injected factors: far past the thresholds (10 on the error, 2 on the calibrated time).
+#: The calibrated-time threshold of these runs (see the module docstring).
+TIME_FACTOR = 4.0
+#: Injected factors: far past the thresholds (10 on the error, TIME_FACTOR on the time).
 ERROR_INJECTED = 1e3
-TIME_INJECTED = 10.0
+TIME_INJECTED = 20.0
 
 
 @dataclass(frozen=True)
@@ -55,7 +59,7 @@ class InjectedWork(CaseWork):
 
 def run_nightly(campaign: Path, root: Path, capsys, *extra: str) -> tuple[int, str]:
     code = cli.main(["nightly", "--campaign", str(campaign), "--root", str(root), "--quiet",
-                     "--workers", "2", *extra])
+                     "--workers", "2", "--time-factor", str(TIME_FACTOR), *extra])
     return code, capsys.readouterr().out
 
 

@@ -278,9 +278,12 @@ def stored_parts(root: Path) -> list[Path]:
 def test_interrupted_run_resumes_without_duplicates_or_gaps(tmp_path, results):
     path = write_campaign(tmp_path, "interruptible", INTERRUPTIBLE)
     ids = {case.case_id for case in load_campaign(path).cases}
+    # A shell that starts a job in the background (`.ci/run &`) ignores SIGINT in it, and the
+    # child would inherit that: give it the default disposition, as an interactive run has.
     run = subprocess.Popen([*MBH, "run", str(path), "--workers", "1", "--quiet"],
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                           env=os.environ | {"MBH_RESULTS_DIR": str(results)})
+                           env=os.environ | {"MBH_RESULTS_DIR": str(results)},
+                           preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     for _ in range(1200):
         if stored_parts(results) or run.poll() is not None:
             break
