@@ -24,7 +24,7 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from harness.joint_equations import JointEquations, point_velocity_jacobian
+from harness.joint_equations import JointEquations, body_twists, point_velocity_jacobian
 from harness.model import DRIVABLE, Mechanism, PrescribedJointRate, PrescribedPointVelocity
 from harness.rank import CONDITION_LIMIT, RankReport, rank_analysis
 from harness.trajectory import BodyStates
@@ -103,15 +103,6 @@ def _start_pose(mech: Mechanism) -> tuple[np.ndarray, Rotation]:
     return position, Rotation.from_matrix(np.array([b.rotation for b in mech.bodies]))
 
 
-def _spatial(step: np.ndarray, planar: bool, n_bodies: int) -> np.ndarray:
-    """Body twists (n_bodies, 6) from the solver's twist vector (planar: [v_x, v_y, ω_z])."""
-    if not planar:
-        return step.reshape(n_bodies, 6)
-    twist = np.zeros((n_bodies, 6))
-    twist[:, [0, 1, 5]] = step.reshape(n_bodies, 3)
-    return twist
-
-
 def _where(equations: JointEquations, residual: np.ndarray) -> tuple[float, str]:
     worst = int(np.nanargmax(np.abs(residual))) if residual.size else 0
     value = float(np.abs(residual[worst])) if residual.size else 0.0
@@ -155,8 +146,8 @@ def newton_positions(mech: Mechanism, equations, tolerance: float,
         if size == 0.0 or polished or (converged_at is None and iteration >= MAX_ITERATIONS):
             break
         jacobian = equations.jacobian(position, rotation.as_quat(scalar_first=True))
-        step = _spatial(scipy.linalg.lstsq(jacobian, -residual, lapack_driver="gelsd")[0],
-                        mech.planar, len(mech.bodies))
+        step = body_twists(scipy.linalg.lstsq(jacobian, -residual, lapack_driver="gelsd")[0],
+                           mech.planar)
         position = position + step[:, :3]
         rotation = Rotation.from_rotvec(step[:, 3:]) * rotation
     iterations = MAX_ITERATIONS if converged_at is None else converged_at
@@ -272,7 +263,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
             f"{rate:g}: {missed} (tolerance {velocity_tolerance:.1e}): the driver rate and the "
             "prescribed velocities contradict the joints or each other; remove or correct one")
 
-    twists = _spatial(twist, mech.planar, len(mech.bodies))
+    twists = body_twists(twist, mech.planar)
     states = BodyStates(position, quaternion, twists[:, :3].copy(), twists[:, 3:].copy())
     _check_driver(mech, equations, states, value, rate, tolerance, velocity_tolerance)
     return Assembly(states, residual, velocity_residual, iterations, report)

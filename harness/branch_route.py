@@ -40,7 +40,7 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from harness.assembly import POSITION_TOLERANCE, assemble, newton_positions
-from harness.joint_equations import JointEquations
+from harness.joint_equations import JointEquations, body_twists, twist_vector
 from harness.model import Mechanism
 from harness.neutral_dynamics import KKT_RCOND, accelerations, gamma, twist_mass_and_forces
 from harness.outputs import wrap_angle
@@ -105,8 +105,7 @@ class BranchEquations:
                        + self._base.labels[joints:joints + drivers])
         self.drive = 0.0
         self._zero = np.zeros(self.m)
-        self._zero = self.residuals(start.position, start.quaternion)
-        self._zero[-drivers or self.m:] = 0.0  # the driver row keeps its own zero
+        self._zero[self._branch] = self.residuals(start.position, start.quaternion)[self._branch]
 
     def residuals(self, position, quaternion, t=0.0) -> np.ndarray:
         """Rows, shape (..., m), m or rad."""
@@ -126,15 +125,11 @@ class BranchEquations:
                                              angular_velocity) @ self._combine.T
 
 
-def _twist_columns(mech: Mechanism, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Linear and angular velocities, (n_bodies, 3) each, from a twist vector of the joint
+def _velocities(mech: Mechanism, twist: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear and angular velocities, (n_bodies, 3) each, from a twist vector over the joint
     equations' columns."""
-    rows = twist.reshape(len(mech.bodies), -1)
-    if not mech.planar:
-        return rows[:, :3].copy(), rows[:, 3:].copy()
-    zeros = np.zeros(len(mech.bodies))
-    return (np.column_stack([rows[:, 0], rows[:, 1], zeros]),
-            np.column_stack([zeros, zeros, rows[:, 2]]))
+    spatial = body_twists(twist, mech.planar)
+    return spatial[:, :3], spatial[:, 3:]
 
 
 class _BranchKinematics:
@@ -176,17 +171,17 @@ class _BranchKinematics:
         """Body states at θ and θ̇ on the branch."""
         position, quaternion = self.pose(theta)
         twist = self.rate(position, quaternion) * theta_rate
-        return BodyStates(position, quaternion, *_twist_columns(self.mech, twist))
+        return BodyStates(position, quaternion, *_velocities(self.mech, twist))
 
     def acceleration(self, theta: float, theta_rate: float) -> float:
         """θ̈ = ν'ᵀ (Q − M a₀ θ̇²) / (ν'ᵀ M ν'), rad/s² (or m/s²); a₀ solves G a₀ = γ(ν')."""
         position, quaternion = self.pose(theta)
         rate = self.rate(position, quaternion)
-        unit = BodyStates(position, quaternion, *_twist_columns(self.mech, rate))
+        unit = BodyStates(position, quaternion, *_velocities(self.mech, rate))
         drift = scipy.linalg.lstsq(self.equations.jacobian(position, quaternion),
                                    gamma(self.equations, unit), cond=KKT_RCOND,
                                    lapack_driver="gelsd")[0]
-        moving = BodyStates(position, quaternion, *_twist_columns(self.mech, rate * theta_rate))
+        moving = BodyStates(position, quaternion, *_velocities(self.mech, rate * theta_rate))
         mass, forces = twist_mass_and_forces(self.mech, moving)
         return float(rate @ (forces - mass @ drift * theta_rate ** 2) / (rate @ mass @ rate))
 
@@ -252,13 +247,7 @@ def _unpack(mech: Mechanism, y: np.ndarray) -> BodyStates:
     position = y[:3 * n].reshape(n, 3)
     quaternion = y[3 * n:7 * n].reshape(n, 4)
     quaternion = quaternion / np.linalg.norm(quaternion, axis=1, keepdims=True)
-    return BodyStates(position, quaternion, *_twist_columns(mech, y[7 * n:]))
-
-
-def _pack_twist(mech: Mechanism, linear: np.ndarray, angular: np.ndarray) -> np.ndarray:
-    if mech.planar:
-        return np.column_stack([linear[:, :2], angular[:, 2]]).ravel()
-    return np.column_stack([linear, angular]).ravel()
+    return BodyStates(position, quaternion, *_velocities(mech, y[7 * n:]))
 
 
 def _quaternion_rates(quaternion: np.ndarray, omega: np.ndarray) -> np.ndarray:
@@ -287,10 +276,10 @@ def full_route(mech: Mechanism, grid: np.ndarray) -> Trajectory:
         return np.concatenate([states.velocity.ravel(),
                                _quaternion_rates(states.quaternion,
                                                  states.angular_velocity).ravel(),
-                               _pack_twist(mech, rates.linear, rates.angular)])
+                               twist_vector(rates.linear, rates.angular, mech.planar)])
 
     y0 = np.concatenate([start.position.ravel(), start.quaternion.ravel(),
-                         _pack_twist(mech, start.velocity, start.angular_velocity)])
+                         twist_vector(start.velocity, start.angular_velocity, mech.planar)])
     solution = _solve(rhs, float(grid[-1]), y0, grid, "full", mech)
     states = [_unpack(mech, y) for y in solution.y.T]
     return _trajectory(grid, states, solution, time.perf_counter() - begin)

@@ -399,7 +399,7 @@ class JointEquations:
         self.mech = mech
         self.n_bodies = len(mech.bodies)
         self.twist_size = 3 if mech.planar else 6
-        self._columns = [0, 1, 5] if mech.planar else list(range(6))
+        self._columns = twist_columns(mech.planar)
         entries = [(f"joint {joint.name} ({joint.type})", block)
                    for joint in mech.joints for block in _joint_blocks(mech, joint)]
         self.n_joint_rows = sum(len(block.suffixes) for _, block in entries)
@@ -544,6 +544,30 @@ class JointEquations:
         return result
 
 
+def twist_columns(planar: bool) -> list[int]:
+    """Which of a body's spatial twist components [v, ω] the Jacobians' columns hold: all six,
+    or [v_x, v_y, ω_z] for a planar mechanism."""
+    return [0, 1, 5] if planar else list(range(6))
+
+
+def body_twists(twist: np.ndarray, planar: bool) -> np.ndarray:
+    """Body twists [v, ω], shape (n_bodies, 6), m/s and rad/s, from a vector over the Jacobians'
+    columns (:func:`twist_columns` per body; the missing planar components are zero)."""
+    columns = twist_columns(planar)
+    rows = np.asarray(twist, dtype=float).reshape(-1, len(columns))
+    spatial = np.zeros((rows.shape[0], 6))
+    spatial[:, columns] = rows
+    return spatial
+
+
+def twist_vector(linear: np.ndarray, angular: np.ndarray, planar: bool) -> np.ndarray:
+    """The inverse of :func:`body_twists`: linear and angular velocities (n_bodies, 3) each to
+    the vector over the Jacobians' columns, shape (n_bodies · len(twist_columns),)."""
+    spatial = np.concatenate([np.asarray(linear, dtype=float),
+                              np.asarray(angular, dtype=float)], axis=-1)
+    return spatial[:, twist_columns(planar)].ravel()
+
+
 def point_velocity_jacobian(mech: Mechanism, body: str, point: np.ndarray, position,
                             quaternion) -> np.ndarray:
     """∂(world velocity of a body point)/∂(body twists), shape (3, twist_size·n_bodies).
@@ -555,7 +579,7 @@ def point_velocity_jacobian(mech: Mechanism, body: str, point: np.ndarray, posit
     index = mech.body_index(body)
     arm = pose.vector(index, np.asarray(point, dtype=float))
     block = np.concatenate([np.eye(3), np.cross(arm[None, :], np.eye(3))], axis=-1)
-    columns = [0, 1, 5] if mech.planar else list(range(6))
+    columns = twist_columns(mech.planar)
     k = len(columns)
     matrix = np.zeros((3, k * len(mech.bodies)))
     matrix[:, k * index:k * index + k] = block[:, columns]

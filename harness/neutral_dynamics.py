@@ -39,7 +39,7 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from harness.joint_equations import JointEquations
+from harness.joint_equations import JointEquations, body_twists
 from harness.outputs import body_rotations
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 from harness.trajectory import BodyStates
@@ -249,12 +249,8 @@ def accelerations(mech: Mechanism, states: BodyStates, equations=None,
             - beta ** 2 * equations.residuals(states.position, states.quaternion)
     solution = scipy.linalg.lstsq(kkt, np.concatenate([rhs, rows]),
                                   cond=KKT_RCOND, lapack_driver="gelsd")[0]
-    twist_rates = solution[:n].reshape(len(mech.bodies), -1)
-    if mech.planar:
-        zeros = np.zeros(len(mech.bodies))
-        return Accelerations(np.column_stack([twist_rates[:, :2], zeros]),
-                             np.column_stack([zeros, zeros, twist_rates[:, 2]]))
-    return Accelerations(twist_rates[:, :3].copy(), twist_rates[:, 3:].copy())
+    twist_rates = body_twists(solution[:n], mech.planar)
+    return Accelerations(twist_rates[:, :3], twist_rates[:, 3:])
 
 
 def start_accelerations(times: np.ndarray, velocity: np.ndarray,
