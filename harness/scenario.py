@@ -608,17 +608,22 @@ class _Builder:
                 forces.append(force)
         return forces
 
-    def _joint_ref(self, table: dict, path: str, types=None) -> str | None:
+    def _joint_ref(self, table: dict, path: str, types=()) -> str | None:
         name = self.c.string(table, "joint", path)
         if name is None:
             return None
+        return self._known_joint(name, _join(path, "joint"), types,
+                                 f"; expected one of {', '.join(types)}")
+
+    def _known_joint(self, name: str, field: str, types=(), rule: str = "") -> str | None:
+        """``name`` if it is a declared joint whose type is among ``types`` (any when empty);
+        else None, with the problem recorded at ``field`` (``rule`` says what was expected)."""
         if name not in self.joints:
-            self.c.add(_join(path, "joint"), f"unknown joint {name!r} (known: {', '.join(self.joints)})")
+            self.c.add(field, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
             return None
         joint = self.joints[name]
-        if types is not None and joint is not None and joint.type not in types:
-            self.c.add(_join(path, "joint"), f"joint {name!r} is {joint.type}; expected one of "
-                       f"{', '.join(types)}")
+        if types and joint is not None and joint.type not in types:
+            self.c.add(field, f"joint {name!r} is {joint.type}{rule}")
             return None
         return name
 
@@ -713,37 +718,20 @@ class _Builder:
             if pair[0] == pair[1]:
                 c.add(path, f"a joint paired with itself ({pair[0]!r})")
                 continue
-            known = [self._angle_joint(name, path) for name in pair]
+            known = [self._known_joint(name, path, ("revolute", "cylindrical"),
+                                       ", which has no angle") for name in pair]
             if all(known):
                 branch.append((pair[0], pair[1]))
         return tuple(branch)
-
-    def _angle_joint(self, name: str, path: str) -> bool:
-        """Whether ``name`` is a known revolute or cylindrical joint (records a problem if not)."""
-        if name not in self.joints:
-            self.c.add(path, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
-            return False
-        joint = self.joints[name]
-        if joint is not None and joint.type not in ("revolute", "cylindrical"):
-            self.c.add(path, f"joint {name!r} is {joint.type}, which has no angle")
-            return False
-        return joint is not None
 
     def _drivable_joint(self, table: dict, key: str, path: str) -> str | None:
         """The joint named by ``table[key]`` if it exists and has a single coordinate."""
         name = self.c.string(table, key, path)
         if name is None:
             return None
-        field = _join(path, key)
-        if name not in self.joints:
-            self.c.add(field, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
-            return None
-        joint = self.joints[name]
-        if joint is not None and joint.type not in DRIVABLE:
-            self.c.add(field, f"joint {name!r} is {joint.type}, which has no single coordinate; "
-                       f"drivable types: {', '.join(DRIVABLE)}")
-            return None
-        return name
+        return self._known_joint(name, _join(path, key), DRIVABLE,
+                                 ", which has no single coordinate; drivable types: "
+                                 f"{', '.join(DRIVABLE)}")
 
     def _prescribed(self, table: dict, driver: str | None) -> tuple[Prescribed, ...] | None:
         """The ``[[initial.velocities]]`` entries, or None if any is invalid."""
