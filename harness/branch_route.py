@@ -27,7 +27,11 @@ branch is a smooth manifold, and two independent routes are well posed:
   :mod:`harness.neutral_dynamics` with the branch rows among the constraints and Baumgarte's
   stabilisation against drift (which changes nothing on the constraints), integrated by DOP853.
 
-Both use only the harness's neutral joint equations, never the in-house kernels.
+Both use only the harness's neutral joint equations, never the in-house kernels.  A scene without
+singular passages may ask for the same two routes with ``[reference] routes = "neutral"``
+(``Mechanism.neutral_routes``): then there are no branch rows, only the joints (and the driver's
+row in the reduced route) — for scenes where the in-house RK4/RKN4 routes at a fixed step cannot
+reach the agreement limit (a crank spinning at 10³ rad/s, a stiff spring).
 """
 
 from __future__ import annotations
@@ -71,7 +75,8 @@ class BranchEquations:
     Parameters
     ----------
     mech : Mechanism
-        With ``mech.branch`` non-empty.
+        With ``mech.neutral_routes`` (a declared branch, or ``routes = "neutral"``; ``mech.branch``
+        may then be empty).
     start : BodyStates
         A configuration on the branch (the assembled start): the relations' zero.
     with_driver : bool
@@ -79,9 +84,10 @@ class BranchEquations:
     """
 
     def __init__(self, mech: Mechanism, start: BodyStates, with_driver: bool = False):
-        if not mech.branch:
-            raise BranchRouteError(f"{mech.source or mech.name}: no [reference] "
-                                   "equal_joint_angles: the scene declares no branch to follow")
+        if not mech.neutral_routes:
+            raise BranchRouteError(f"{mech.source or mech.name}: neither [reference] "
+                                   "equal_joint_angles nor routes = \"neutral\": the scene "
+                                   "does not ask for the neutral routes")
         names = tuple(dict.fromkeys(name for pair in mech.branch for name in pair))
         self._base = JointEquations(mech, with_driver=with_driver, drive=(0.0, 0.0),
                                     coordinates=names)
@@ -139,14 +145,20 @@ class _BranchKinematics:
         self.mech = mech
         self.equations = BranchEquations(mech, start, with_driver=True)
         self.tolerance = POSITION_TOLERANCE * max(1.0, float(np.abs(start.position).max()))
-        self._last = (start.position.copy(),
-                      Rotation.from_quat(start.quaternion, scalar_first=True))
+        self.restart(start)
         jacobian = self.equations.jacobian(start.position, start.quaternion)
         rank = np.linalg.matrix_rank(jacobian[:-1])
         if jacobian.shape[1] - rank != 1:
             raise BranchRouteError(
                 f"{mech.source or mech.name}: the reduced route needs mobility 1 on the "
                 f"branch; the joint and branch rows leave {jacobian.shape[1] - rank}")
+
+    def restart(self, states: BodyStates) -> None:
+        """Warm-start the next Newton solve from ``states``' configuration.  Samples are
+        rebuilt in time order from the start: a warm start from the end of the run can land on
+        another assembly branch at the first samples' θ."""
+        self._last = (states.position.copy(),
+                      Rotation.from_quat(states.quaternion, scalar_first=True))
 
     def pose(self, theta: float) -> tuple[np.ndarray, np.ndarray]:
         """Positions (n_bodies, 3) and quaternions (n_bodies, 4) at driver coordinate θ."""
@@ -223,7 +235,7 @@ def reduced_route(mech: Mechanism, grid: np.ndarray) -> Trajectory:
     Parameters
     ----------
     mech : Mechanism
-        With ``mech.branch`` and mobility 1 on it.
+        With ``mech.neutral_routes`` and mobility 1 (on the branch, if one is declared).
     grid : ndarray, shape (n,)
         Sample times from 0 to the end, s.
     """
@@ -236,6 +248,7 @@ def reduced_route(mech: Mechanism, grid: np.ndarray) -> Trajectory:
 
     solution = _solve(rhs, float(grid[-1]), list(_driver_state(mech, start)), grid, "reduced",
                       mech)
+    kinematics.restart(start)
     states = [kinematics.states(theta, rate) for theta, rate in solution.y.T]
     return _trajectory(grid, states, solution, time.perf_counter() - begin)
 
@@ -262,7 +275,7 @@ def full_route(mech: Mechanism, grid: np.ndarray) -> Trajectory:
     Parameters
     ----------
     mech : Mechanism
-        With ``mech.branch``.
+        With ``mech.neutral_routes``.
     grid : ndarray, shape (n,)
         Sample times from 0 to the end, s.
     """

@@ -315,7 +315,7 @@ class _Reader:
             self.c.add(field, f"expected a scenario name, got {name!r}")
             return None
         if name not in self._mechanisms:
-            if name not in scenario.scenario_names():
+            if not scenario.is_scenario_name(name):
                 known = ", ".join(scenario.scenario_names())
                 self.c.add(field, f"unknown scenario {name!r} (known: {known})")
                 self._mechanisms[name] = None

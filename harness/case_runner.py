@@ -108,14 +108,16 @@ class Selection:
         """
         from adapters import adapter_names
 
-        def names(text, known, option):
+        def names(text, known, option, is_known=None):
+            is_known = is_known or known.__contains__
             chosen = [name.strip() for name in (text or "").split(",") if name.strip()]
-            unknown = [name for name in chosen if name not in known]
+            unknown = [name for name in chosen if not is_known(name)]
             if unknown:
                 raise ToleranceError(f"{option}: unknown {', '.join(unknown)} (known: "
                                      f"{', '.join(known)})")
             return frozenset(chosen) if chosen else None
-        return cls(names(scenarios, scenario.scenario_names(), "--mbh-scenarios"),
+        return cls(names(scenarios, scenario.scenario_names(), "--mbh-scenarios",
+                         scenario.is_scenario_name),
                    names(adapters, adapter_names(), "--mbh-adapters"))
 
     def reason(self, spec: CaseSpec) -> str | None:

@@ -199,7 +199,7 @@ class Output:
     """A named scalar quantity computed from body states.
 
     ``joint_angle``: rotation of ``body2`` relative to ``body1`` about the joint axis since t = 0,
-    right-hand rule, unwrapped (rad).  ``joint_rate``: its derivative (rad/s).
+    right-hand rule, unwrapped, plus ``offset`` (rad).  ``joint_rate``: its derivative (rad/s).
     ``joint_position``: slide along the joint axis since t = 0 (m).  ``position``/``velocity``:
     component ``component`` (0, 1, 2 = x, y, z) of a body's centre of mass (m, m/s).
     ``point_position``/``point_velocity``: the same for the body point ``point`` (body frame, m).
@@ -210,6 +210,7 @@ class Output:
     target: str
     component: int = 0
     point: np.ndarray | None = None
+    offset: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -232,6 +233,9 @@ class Mechanism:
     #: Pairs of joints that turn by equal angles on the assembly branch the motion stays on
     #: (``[reference] equal_joint_angles``); only the reference routes use them.
     branch: tuple[tuple[str, str], ...] = ()
+    #: Whether the reference takes the neutral DOP853 routes of :mod:`harness.branch_route`
+    #: (``[reference] routes = "neutral"``, implied by a declared branch).
+    neutral_routes: bool = False
 
     @property
     def planar(self) -> bool:

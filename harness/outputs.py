@@ -92,7 +92,7 @@ def output_series(mech: Mechanism, trajectory: Trajectory, name: str) -> np.ndar
         return slide - slide[0]
     angle = unwrap_from_start(joint_angle(mech, joint, trajectory.position, rotations))
     if output.kind == "joint_angle":
-        return angle
+        return angle + output.offset
     return joint_rate(mech, joint, trajectory.angular_velocity, rotations)
 
 

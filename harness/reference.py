@@ -22,7 +22,9 @@ ODE steepens near a fold of the independent coordinate, see the in-house ``parti
 whose default now switches at a 1 % conditioning advantage).
 
 A scene that passes singular positions and declares the branch it stays on (``[reference]
-equal_joint_angles``, e.g. ``double_fourbar``) uses two other routes, :data:`BRANCH_ROUTE_A` (every
+equal_joint_angles``, e.g. ``double_fourbar``), or that asks for them (``[reference] routes =
+"neutral"``: fast or stiff scenes where a fixed 5e-5 s step cannot reach the limit), uses two
+other routes, :data:`BRANCH_ROUTE_A` (every
 body, index-1 Newton–Euler with the branch's rows) and :data:`BRANCH_ROUTE_B` (the driver
 coordinate alone, reduced along the branch), both DOP853 on the harness's neutral joint equations: the
 RK4/RKN4 routes lose the branch's accuracy at every passage (they disagree by 1.2e-4 m on
@@ -118,9 +120,10 @@ def route_difference(mech: Mechanism, a: Trajectory, b: Trajectory) -> dict:
 
 
 def routes(mech: Mechanism) -> tuple[tuple[str, float], tuple[str, float]]:
-    """Routes A and B of ``mech``: the branch routes for a scene that declares its branch, the
-    in-house RK4/RKN4 routes otherwise."""
-    return (BRANCH_ROUTE_A, BRANCH_ROUTE_B) if mech.branch else (ROUTE_A, ROUTE_B)
+    """Routes A and B of ``mech``: the neutral (branch) routes for a scene that declares its
+    branch or asks for them (``[reference] routes = "neutral"``), the in-house RK4/RKN4 routes
+    otherwise."""
+    return (BRANCH_ROUTE_A, BRANCH_ROUTE_B) if mech.neutral_routes else (ROUTE_A, ROUTE_B)
 
 
 def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray) -> Trajectory:

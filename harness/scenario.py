@@ -57,15 +57,20 @@ File format (all SI; angles in degrees only where the key says ``_deg``)::
     [reference]                   # optional: what the reference routes may assume
     equal_joint_angles = [["O1", "O2"], ["O1", "O3"]]   # joints that turn by equal angles on the
                                   # assembly branch the motion stays on (harness/branch_route.py)
+    routes = "neutral"            # optional: the neutral DOP853 routes of harness/branch_route.py
+                                  # (implied by equal_joint_angles), not the in-house RK4/RKN4 ones
 
     [outputs]
     crank_angle = { kind = "joint_angle", joint = "O" }
+    beta = { kind = "joint_angle", joint = "O", offset = -0.0617 }   # rad added: an absolute angle
     slider_x = { kind = "position", body = "slider", component = "x" }
     tip_x = { kind = "point_position", body = "crank", location = [0.0, 1.0, 0.0], component = "x" }
     tip_vy = { kind = "point_velocity", body = "crank", location = [0.0, 1.0, 0.0],
                component = "y" }
 
 Outputs: ``joint_angle``, ``joint_rate`` (rad, rad/s) and ``joint_position`` (m) name a joint;
+a ``joint_angle`` may add a constant ``offset`` (rad, default 0), e.g. the angle's value in the
+reference configuration, so that the output is a publication's absolute angle;
 ``position`` and ``velocity`` name a moving body (not ground) and a component of its centre of
 mass; ``point_position`` and ``point_velocity`` also take ``location``, a world point in the
 reference configuration that the loader converts to the body frame (p̄ = Aᵀ(location − r)), and
@@ -141,7 +146,7 @@ _FORCE_KEYS = {
 _OUTPUT_KINDS = {"joint_angle": "joint", "joint_rate": "joint", "joint_position": "joint",
                  "position": "body", "velocity": "body",
                  "point_position": "point", "point_velocity": "point"}
-_OUTPUT_KEYS = {"joint": {"kind", "joint"}, "body": {"kind", "body", "component"},
+_OUTPUT_KEYS = {"joint": {"kind", "joint", "offset"}, "body": {"kind", "body", "component"},
                 "point": {"kind", "body", "location", "component"}}
 _INITIAL_KEYS = {"driver", "value", "rate", "guess", "velocities"}
 _JOINT_RATE_KEYS = {"joint", "rate"}
@@ -353,6 +358,17 @@ def scenario_names() -> list[str]:
     return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
 
 
+def is_scenario_name(name: str) -> bool:
+    """Whether ``name`` names a shipped scenario or a member (``family@parameter``) of a known
+    generated family; the member's parameter is checked when it loads."""
+    family, at, _ = name.partition("@")
+    if not at:
+        return name in scenario_names()
+    from harness.families import family_names
+
+    return family in family_names()
+
+
 def load(name_or_path: str | Path) -> Mechanism:
     """Load and validate a scenario by shipped name or by path.
 
@@ -362,6 +378,8 @@ def load(name_or_path: str | Path) -> Mechanism:
         With every problem found, each naming the file and the field.
     """
     path = Path(name_or_path)
+    if path.suffix != ".toml" and "@" in str(name_or_path):
+        return _load_family_member(str(name_or_path))
     if path.suffix != ".toml":
         path = scenario_path(str(name_or_path))
     file = str(path)
@@ -373,6 +391,20 @@ def load(name_or_path: str | Path) -> Mechanism:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise ScenarioError([Problem(file, "-", f"not valid TOML: {error}")]) from None
     return _Builder(file, path.stem, document).build()
+
+
+def _load_family_member(name: str) -> Mechanism:
+    """Member ``family@parameter`` of a generated family (:mod:`harness.families`), validated by
+    the same loader as a file."""
+    from harness.families import FamilyError, family_document
+
+    family, _, parameter = name.partition("@")
+    file = f"harness/families.py: {name}"
+    try:
+        document = family_document(family, parameter)
+    except FamilyError as error:
+        raise ScenarioError([Problem(file, "-", str(error))]) from None
+    return _Builder(file, name, document).build()
 
 
 class _Builder:
@@ -416,7 +448,7 @@ class _Builder:
         forces = self._forces()
         initial = self._initial()
         outputs = self._outputs()
-        branch = self._reference()
+        branch, neutral_routes = self._reference()
         if c.problems:
             raise ScenarioError(c.problems)
         return Mechanism(
@@ -424,6 +456,7 @@ class _Builder:
             joints=tuple(self.joints.values()), forces=tuple(forces), gravity=gravity,
             initial=initial, duration=duration, outputs=tuple(outputs), tags=tuple(tags),
             notes=notes, source=c.file, content_hash=_hash(doc), branch=branch,
+            neutral_routes=neutral_routes or bool(branch),
         )
 
     # -- sections -------------------------------------------------------------------------
@@ -608,6 +641,13 @@ class _Builder:
                 forces.append(force)
         return forces
 
+    def _offset(self, spec: dict, kind: str, path: str) -> float | None:
+        """A joint output's ``offset`` (rad, default 0): only ``joint_angle`` takes one."""
+        if "offset" in spec and kind != "joint_angle":
+            self.c.add(_join(path, "offset"), f"only joint_angle outputs take an offset, not {kind}")
+            return None
+        return self.c.number(spec, "offset", path, default=0.0)
+
     def _joint_ref(self, table: dict, path: str, types=()) -> str | None:
         name = self.c.string(table, "joint", path)
         if name is None:
@@ -694,20 +734,24 @@ class _Builder:
             return None
         return InitialState(driver, value, rate, guess, prescribed)
 
-    def _reference(self) -> tuple[tuple[str, str], ...]:
+    def _reference(self) -> tuple[tuple[tuple[str, str], ...], bool]:
         """The ``[reference]`` table: pairs of revolute or cylindrical joints that turn by equal
-        angles on the motion's assembly branch."""
+        angles on the motion's assembly branch, and whether the reference takes the neutral
+        routes (``routes = "neutral"``; the default ``"inhouse"``)."""
         c = self.c
         table = self.doc.get("reference", {})
         if not isinstance(table, dict):
             c.add("reference", "expected a table")
-            return ()
-        c.unknown_keys(table, {"equal_joint_angles"}, "reference")
+            return (), False
+        c.unknown_keys(table, {"equal_joint_angles", "routes"}, "reference")
+        routes = table.get("routes", "inhouse")
+        if routes not in ("inhouse", "neutral"):
+            c.add("reference.routes", f"expected 'inhouse' or 'neutral', got {routes!r}")
         pairs = table.get("equal_joint_angles", [])
         field = "reference.equal_joint_angles"
         if not isinstance(pairs, list):
             c.add(field, f"expected a list of joint-name pairs, got {pairs!r}")
-            return ()
+            return (), False
         branch = []
         for index, pair in enumerate(pairs):
             path = f"{field}[{index}]"
@@ -722,7 +766,7 @@ class _Builder:
                                        ", which has no angle") for name in pair]
             if all(known):
                 branch.append((pair[0], pair[1]))
-        return tuple(branch)
+        return tuple(branch), routes == "neutral"
 
     def _drivable_joint(self, table: dict, key: str, path: str) -> str | None:
         """The joint named by ``table[key]`` if it exists and has a single coordinate."""
@@ -840,8 +884,9 @@ class _Builder:
             c.unknown_keys(spec, _OUTPUT_KEYS[ref], path)
             if ref == "joint":
                 target = self._joint_ref(spec, path)
-                if target is not None:
-                    outputs.append(Output(name, kind, target))
+                offset = self._offset(spec, kind, path)
+                if target is not None and offset is not None:
+                    outputs.append(Output(name, kind, target, offset=offset))
                 continue
             target = self._moving_body(spec, path)
             letter = c.string(spec, "component", path, default="x")

@@ -346,3 +346,22 @@ def test_markup_and_emoji_names_load(load_variant):
 ])
 def test_extreme_numbers_are_refused_with_their_field(load_variant, edit, field, fragment):
     assert _has(_problems(load_variant, "fourbar", [edit]), field, fragment)
+
+
+# -- joint-angle offsets ----------------------------------------------------------------------
+def test_a_joint_angle_offset_is_added_to_the_angle(load_variant):
+    old = 'crank_rate = { kind = "joint_rate", joint = "O" }'
+    mech = load_variant("fourbar", [(old, old + '\nbeta = { kind = "joint_angle", joint = "O", '
+                                               'offset = -0.25 }')])
+    trajectory = _rest_trajectory(mech, omega=2.0)
+    assert mech.output("beta").offset == -0.25
+    assert output_series(mech, trajectory, "beta")[0] == -0.25
+
+
+def test_offset_problems_name_the_field(load_variant):
+    old = 'crank_rate = { kind = "joint_rate", joint = "O" }'
+    new = (old + '\nb1 = { kind = "joint_rate", joint = "O", offset = 1.0 }'
+           '\nb2 = { kind = "joint_angle", joint = "O", offset = "pi" }')
+    problems = _problems(load_variant, "fourbar", [(old, new)])
+    assert _has(problems, "outputs.b1.offset", "only joint_angle outputs take an offset")
+    assert _has(problems, "outputs.b2.offset", "expected a finite number")
