@@ -139,11 +139,14 @@ class SweepSpec:
     methods : dict
         Adapter name → tuple of method strings.
     dt_min, dt_max : float
-        Bisection bounds, s; each divides 0.01 s.  Candidates are 0.01 s / k for integer k.
+        Bisection bounds, s; each divides 0.01 s.  Candidates are a scene's evaluation step
+        (``sample_steps``, 0.01 s unless the scene declares a finer one) / k for integer k.
     max_bisections : int
     t_end : dict
         Scenario name → duration of its sweep runs, s (the campaign's top-level ``[t_end]``
         overrides, else the scenario's duration).
+    sample_steps : dict
+        Scenario name → its evaluation step, s.
     """
 
     scenarios: tuple[str, ...]
@@ -153,6 +156,7 @@ class SweepSpec:
     dt_max: float
     max_bisections: int
     t_end: dict[str, float] = dataclasses.field(default_factory=dict)
+    sample_steps: dict[str, float] = dataclasses.field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -464,7 +468,8 @@ class _Reader:
         for name, mech in scenes:
             duration = self._duration(durations, name, mech)
             usable = [dt for i, dt in steps
-                      if self._divides(dt, duration, f"{_join(path, 'dts')}[{i}]", name)]
+                      if self._divides(dt, duration, f"{_join(path, 'dts')}[{i}]", name)
+                      and self._samples(dt, mech, f"{_join(path, 'dts')}[{i}]")]
             cases += [CaseSpec(name, adapter, method, dt, duration, repetitions, timeout)
                       for adapter, strings in methods.items() for method in strings
                       for dt in usable]
@@ -483,6 +488,15 @@ class _Reader:
         self.c.add(field, f"step {dt!r} s does not divide the duration {duration!r} s of "
                    f"scenario {name!r} (t_end must be an integer multiple of dt)")
         return False
+
+    def _samples(self, dt: float, mech: Mechanism, field: str) -> bool:
+        """Whether ``dt`` divides the scene's own evaluation step (``sample_step``)."""
+        try:
+            steps_per_sample(dt, mech.sample_step)
+        except ValueError as error:
+            self.c.add(field, f"scenario {mech.name!r}: {error}")
+            return False
+        return True
 
     # --- sweep --------------------------------------------------------------------------------
 
@@ -506,4 +520,4 @@ class _Reader:
                 self._divides(dt, duration, f"sweep.{key}", name)
         return SweepSpec(tuple(durations), tuple(methods),
                          {a: tuple(m) for a, m in methods.items()}, dt_min, dt_max, bisections,
-                         durations)
+                         durations, {name: mech.sample_step for name, mech in scenes})

@@ -29,7 +29,7 @@ def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
     A mechanism the engine cannot build gives an ``unsupported`` trajectory.  Raises ValueError
     for a step or end time that does not fit the sample grid or the adapter (user input).
     """
-    times = sample_times(dt, t_end)
+    times = sample_times(dt, t_end, mech.sample_step)
     with captured_output() as printed:
         try:
             trajectory = adapter.simulate(adapter.build(mech), method, dt, t_end, times)

@@ -226,6 +226,9 @@ class Mechanism:
     initial: InitialState
     duration: float
     outputs: tuple[Output, ...]
+    #: Spacing of the evaluation grid, s (:mod:`harness.sampling`): fine enough that no joint
+    #: turns by π between two samples.
+    sample_step: float = 0.01
     tags: tuple[str, ...] = ()
     notes: str = ""
     source: str = ""

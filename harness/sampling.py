@@ -4,8 +4,11 @@ Every error figure (outputs against the reference, constraint violations, energy
 taken on one grid per scenario, whatever step a case uses, so maxima for different dt compare
 like with like.  The grid is every :data:`EVALUATION_STEP` from 0 to the end time: 10 ms, the
 seed's own step (Rouvinen's Δt = 0.01 s, SEEDS.md) and a multiple of the reference grid step
-(1 ms), so every sample lands on a reference sample.  Sampling every 10 ms resolves the shipped
+(1 ms), so every sample lands on a reference sample.  Sampling every 10 ms resolves the seed's
 motions (fastest body 69 rad/s: 0.69 rad per sample, below the π that unwrapping angles needs).
+A faster scene declares a finer ``sample_step`` (``Mechanism.sample_step``, a multiple of 1 ms):
+Andrews' squeezer turns its crank by up to 7.6 rad in 10 ms, which unwrapping would read 4π short
+(and its energy balance 2π·0.033 J short), so it samples every 1 ms (≤ 1.4 rad).
 
 A case's step dt must divide the evaluation step: an integer number of steps per sample, to a
 relative 1e-9.
@@ -24,34 +27,34 @@ EVALUATION_STEP = 0.01
 STEP_MATCH = 1e-9
 
 
-def steps_per_sample(dt: float) -> int:
-    """Number of steps of size ``dt`` (s) between two evaluation samples.
+def steps_per_sample(dt: float, step: float = EVALUATION_STEP) -> int:
+    """Number of steps of size ``dt`` (s) between two evaluation samples ``step`` (s) apart.
 
     Raises
     ------
     ValueError
-        When ``dt`` does not divide :data:`EVALUATION_STEP`; the message names dt, the grid step
-        and the valid choices.
+        When ``dt`` does not divide ``step``; the message names dt, the grid step and the valid
+        choices.
     """
-    ratio = EVALUATION_STEP / dt if dt > 0 else 0.0
+    ratio = step / dt if dt > 0 else 0.0
     count = round(ratio) if np.isfinite(ratio) else 0  # a subnormal dt overflows the ratio
     if count < 1 or abs(ratio - count) > STEP_MATCH * ratio:
-        choices = ", ".join(f"{EVALUATION_STEP / k:g}" for k in (1, 2, 4, 5, 10, 20, 100))
+        choices = ", ".join(f"{step / k:g}" for k in (1, 2, 4, 5, 10, 20, 100))
         raise ValueError(f"step dt = {dt:g} s does not divide the evaluation grid step "
-                         f"{EVALUATION_STEP:g} s: dt must be {EVALUATION_STEP:g} s / k for an "
-                         f"integer k ≥ 1 (e.g. {choices} s)")
+                         f"{step:g} s: dt must be {step:g} s / k for an integer k ≥ 1 "
+                         f"(e.g. {choices} s)")
     return count
 
 
-def sample_times(dt: float, t_end: float) -> np.ndarray:
-    """Evaluation sample times from 0 to t_end (s), every :data:`EVALUATION_STEP`, shape (k,).
+def sample_times(dt: float, t_end: float, step: float = EVALUATION_STEP) -> np.ndarray:
+    """Evaluation sample times from 0 to t_end (s), every ``step`` (s), shape (k,).
 
     ``dt`` (s) is checked by :func:`steps_per_sample`; the last sample is the last grid time not
     after ``t_end``.  The times are multiples of the reference grid step, rounded to it.
     """
-    steps_per_sample(dt)
-    count = int(np.floor(t_end / EVALUATION_STEP + 1e-9))
-    return np.arange(count + 1) * round(EVALUATION_STEP / GRID_STEP) * GRID_STEP
+    steps_per_sample(dt, step)
+    count = int(np.floor(t_end / step + 1e-9))
+    return np.arange(count + 1) * round(step / GRID_STEP) * GRID_STEP
 
 
 #: Sample times within this of a reference grid point match it, s.

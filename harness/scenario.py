@@ -9,6 +9,8 @@ File format (all SI; angles in degrees only where the key says ``_deg``)::
     kind = "planar"               # or "spatial"
     plane = "xy"                  # planar only
     duration = 4.0                # s
+    sample_step = 0.01            # optional, s: the evaluation grid's spacing (default 0.01), a
+                                  # multiple of the reference grid's 1 ms (harness/sampling.py)
     gravity = [0.0, -9.81, 0.0]   # m/s², world
     tags = ["seed"]
     notes = "free text: sources, typos found in them"
@@ -131,7 +133,7 @@ from harness.model import (
 
 SCENARIO_DIR = Path(__file__).resolve().parent.parent / "scenarios"
 
-_TOP_KEYS = {"name", "kind", "plane", "duration", "gravity", "tags", "notes", "bodies", "joints",
+_TOP_KEYS = {"name", "kind", "plane", "duration", "sample_step", "gravity", "tags", "notes", "bodies", "joints",
              "forces", "initial", "outputs", "reference"}
 _BODY_KEYS = {"name", "mass", "inertia", "position", "angle_deg", "euler313_deg", "quaternion"}
 _JOINT_KEYS = {"name", "type", "body1", "body2", "location", "location2", "axis", "axis2", "normal"}
@@ -433,6 +435,7 @@ class _Builder:
             c.add("plane", "only planar scenarios declare a plane")
         self.planar = kind == "planar"
         duration = c.number(doc, "duration", "", positive=True)
+        sample_step = self._sample_step(duration)
         gravity = c.vector(doc, "gravity", "")
         tags = doc.get("tags", [])
         if not isinstance(tags, list) or not all(isinstance(t, str) for t in tags):
@@ -454,10 +457,29 @@ class _Builder:
         return Mechanism(
             name=name, kind=kind, bodies=tuple(self.bodies.values()),
             joints=tuple(self.joints.values()), forces=tuple(forces), gravity=gravity,
-            initial=initial, duration=duration, outputs=tuple(outputs), tags=tuple(tags),
+            initial=initial, duration=duration, sample_step=sample_step, outputs=tuple(outputs),
+            tags=tuple(tags),
             notes=notes, source=c.file, content_hash=_hash(doc), branch=branch,
             neutral_routes=neutral_routes or bool(branch),
         )
+
+    def _sample_step(self, duration: float | None) -> float | None:
+        """``sample_step`` (s): a multiple of the reference grid step, at most the duration."""
+        from harness.reference import GRID_STEP
+        from harness.sampling import EVALUATION_STEP, STEP_MATCH
+
+        step = self.c.number(self.doc, "sample_step", "", default=EVALUATION_STEP, positive=True)
+        if step is None:
+            return None
+        count = round(step / GRID_STEP)
+        if count < 1 or abs(step - count * GRID_STEP) > STEP_MATCH * step:
+            self.c.add("sample_step", f"{step!r} s is not a multiple of the reference grid step "
+                       f"{GRID_STEP:g} s")
+            return None
+        if duration is not None and step > duration:
+            self.c.add("sample_step", f"{step!r} s is longer than the duration {duration!r} s")
+            return None
+        return count * GRID_STEP
 
     # -- sections -------------------------------------------------------------------------
     def _tables(self, key: str, required: bool) -> list[tuple[str, dict]]:

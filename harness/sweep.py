@@ -2,7 +2,8 @@
 
 For each (scenario, adapter, method) of a campaign's ``[sweep]`` the sweep bisects on the step
 size dt over the admissible steps between the campaign's ``dt_min`` and ``dt_max``: the steps
-that divide the evaluation grid step, dt = 0.01 s / k for an integer k (:mod:`harness.sampling`).
+that divide the scene's evaluation grid step, dt = 0.01 s / k for an integer k (or the scene's
+finer ``sample_step`` / k, :mod:`harness.sampling`).
 A step passes when its run ends ``ok`` and, where the scenario has a verified reference, its
 main-output error is within the campaign's accuracy threshold (the row's ``accurate``); without a
 reference only the status counts, and the row's ``criterion`` says so.
@@ -25,11 +26,6 @@ from harness.jsonout import dumps
 from harness.sampling import EVALUATION_STEP
 
 
-def step_count(dt: float) -> int:
-    """k of the admissible step nearest ``dt`` (dt ≈ EVALUATION_STEP / k)."""
-    return max(1, round(EVALUATION_STEP / dt))
-
-
 def passes(row: dict) -> bool:
     """Whether a sweep run counts as stable: ``ok`` and not known to be inaccurate."""
     return row.get("status") == "ok" and row.get("accurate") is not False
@@ -37,7 +33,7 @@ def passes(row: dict) -> bool:
 
 @dataclass
 class Bisection:
-    """The search of one (scenario, adapter, method) over k (dt = EVALUATION_STEP / k).
+    """The search of one (scenario, adapter, method) over k (dt = base / k).
 
     Attributes
     ----------
@@ -49,6 +45,8 @@ class Bisection:
         Smallest k known to pass (None: none known).
     tried : list of [dt, status, main_output_error]
         Every run, in order (stored as strict JSON: a NaN error is the string "NaN").
+    base : float
+        The scene's evaluation step, s.
     """
 
     scenario: str
@@ -61,6 +59,11 @@ class Bisection:
     k_pass: int | None = None
     tried: list = field(default_factory=list)
     reference: bool = True
+    base: float = EVALUATION_STEP
+
+    def dt(self, k: int) -> float:
+        """The step of candidate k, s."""
+        return self.base / k
 
     def next_k(self) -> int | None:
         """The next k to run, or None when the search is over."""
@@ -78,7 +81,7 @@ class Bisection:
     def record(self, k: int, row: dict) -> None:
         """Take the result of the run at k."""
         error = row.get("main_output_error")
-        self.tried.append([EVALUATION_STEP / k, row.get("status"), error])
+        self.tried.append([self.dt(k), row.get("status"), error])
         if row.get("accurate") is None:
             self.reference = False
         if passes(row):
@@ -90,7 +93,7 @@ class Bisection:
         """The sweep row: the largest passing step (NaN when none passed) and every try."""
         return {"sweep_id": f"{self.scenario}|{self.adapter}|{self.method}",
                 "scenario": self.scenario, "adapter": self.adapter, "method": self.method,
-                "largest_stable_dt": (EVALUATION_STEP / self.k_pass if self.k_pass is not None
+                "largest_stable_dt": (self.dt(self.k_pass) if self.k_pass is not None
                                       else math.nan),
                 "criterion": "ok and accurate" if self.reference else "ok (no reference)",
                 "tried": dumps(self.tried, indent=None)}
@@ -98,11 +101,15 @@ class Bisection:
 
 def bisections(sweep) -> list[Bisection]:
     """One :class:`Bisection` per (scenario, adapter, method) of a campaign's ``SweepSpec``."""
-    k_min, k_max = math.ceil(EVALUATION_STEP / sweep.dt_max - 1e-9), \
-        math.floor(EVALUATION_STEP / sweep.dt_min + 1e-9)
-    return [Bisection(scenario, adapter, method, k_min, k_max, sweep.max_bisections)
-            for scenario in sweep.scenarios for adapter in sweep.adapters
-            for method in sweep.methods.get(adapter, ())]
+    searches = []
+    for scenario in sweep.scenarios:
+        base = sweep.sample_steps.get(scenario, EVALUATION_STEP)
+        k_min = max(1, math.ceil(base / sweep.dt_max - 1e-9))
+        k_max = max(k_min, math.floor(base / sweep.dt_min + 1e-9))
+        searches += [Bisection(scenario, adapter, method, k_min, k_max, sweep.max_bisections,
+                               base=base)
+                     for adapter in sweep.adapters for method in sweep.methods.get(adapter, ())]
+    return searches
 
 
 def stability_sweep(searches: list[Bisection], make_spec: Callable, run: Callable,
@@ -130,7 +137,7 @@ def stability_sweep(searches: list[Bisection], make_spec: Callable, run: Callabl
                 add_row(search.row())
             else:
                 batch[id(search)] = (search, k, make_spec(search.scenario, search.adapter,
-                                                          search.method, EVALUATION_STEP / k))
+                                                          search.method, search.dt(k)))
         rows = run([spec for _, _, spec in batch.values()]) if batch else {}
         for search, k, spec in batch.values():
             search.record(k, rows[spec.case_id])
