@@ -76,7 +76,10 @@ def cmd_check(args) -> int:
     :mod:`harness.rank`): assembly residuals, rank, mobility, redundant equations, singularity.
 
     ``n_coordinates`` counts twist coordinates (6 per spatial body, 3 per planar body) and
-    ``n_equations`` the joint rows (no driver, no normalisation rows).  A start at a singular
+    ``n_equations`` the joint rows (no driver, no normalisation rows);
+    ``redundant_equation_labels`` names the rows the rank-revealing QR leaves over and
+    ``dependent_equation_labels`` every row taking part in a dependency (any of which could be
+    the one dropped: all 30 on Bricard's mechanism).  A start at a singular
     configuration (condition number above :data:`harness.rank.CONDITION_LIMIT`, or rank lost) is
     refused: its entry has the ``error`` and, with the rank analysis there, a ``warning``.
     """

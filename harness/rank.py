@@ -7,7 +7,10 @@
   since twists have no redundant coordinates).
 * The redundant rows, by name: a rank-revealing QR factorisation with column pivoting of Jᵀ
   (scipy.linalg.qr), whose pivot order picks the independent rows first; the rows left over are
-  linear combinations of them.
+  linear combinations of them.  Which rows are left over is a choice of the pivoting; the rows
+  that take part in a dependency at all (any of which could be the one dropped) are the support of
+  the left null space of J, reported with them: on Bricard's mechanism the one redundancy spans
+  all 30 rows of the six joints, so no joint is redundant by itself.
 * The singularity measure: the condition number and smallest singular value of the system formed by
   the independent rows and the driver row (square for a mechanism of mobility 1).
 """
@@ -35,6 +38,11 @@ RANK_TOLERANCE = 1e-9
 #: 2.3e7.  The limit thus refuses starts within ~1e-5 rad of a singular position, where the
 #: velocities lose more than 6 of their 16 digits; the shipped scenes measure 4.4–15.
 CONDITION_LIMIT = 1e6
+#: A joint row whose component in the left null space of J (the norm of its row of an orthonormal
+#: basis, between 0 and 1) exceeds this takes part in a dependency.  Measured: rows outside every
+#: dependency ≤ 1.8e-16 (round-off, all-revolute spatial four-bar); dependent rows 1/√30 = 0.18 on
+#: Bricard's mechanism and ≥ 0.20 on the all-revolute spatial four-bar.
+DEPENDENCE_TOLERANCE = 1e-9
 
 
 def grubler_mobility(mech: Mechanism) -> int:
@@ -42,6 +50,17 @@ def grubler_mobility(mech: Mechanism) -> int:
     if mech.planar:
         return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
     return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)
+
+
+def dependent_rows(matrix: np.ndarray, rank: int, tol: float = DEPENDENCE_TOLERANCE) -> np.ndarray:
+    """Indices (sorted) of the rows of ``matrix`` (m, n) of rank ``rank`` that take part in a linear
+    dependency: those with a component above ``tol`` in the left null space (the last m − rank
+    left singular vectors).  Dropping any one of them keeps the rank; the others are essential.
+    """
+    if rank >= matrix.shape[0]:
+        return np.zeros(0, dtype=int)
+    left = np.linalg.svd(matrix, full_matrices=True)[0][:, rank:]
+    return np.flatnonzero(np.linalg.norm(left, axis=1) > tol)
 
 
 def independent_rows(matrix: np.ndarray, tol: float = RANK_TOLERANCE) -> np.ndarray:
@@ -70,7 +89,10 @@ class RankReport:
         Joint rows (without the driver).
     rank, mobility, grubler_mobility : int
     redundant_labels : tuple of str
-        The joint rows that are linear combinations of the others.
+        The joint rows that are linear combinations of the others (the QR pivoting's choice).
+    dependent_labels : tuple of str
+        Every joint row that takes part in a dependency (:func:`dependent_rows`): any of them could
+        be dropped instead of those in ``redundant_labels``.
     independent : tuple of int
         Indices of the independent joint rows.
     condition : float
@@ -85,6 +107,7 @@ class RankReport:
     mobility: int
     grubler_mobility: int
     redundant_labels: tuple[str, ...]
+    dependent_labels: tuple[str, ...]
     independent: tuple[int, ...]
     condition: float
     smallest_singular_value: float
@@ -104,6 +127,7 @@ class RankReport:
             "rank": self.rank, "mobility": self.mobility, "grubler_mobility": self.grubler_mobility,
             "redundant_equations": len(self.redundant_labels),
             "redundant_equation_labels": list(self.redundant_labels),
+            "dependent_equation_labels": list(self.dependent_labels),
             "jacobian_condition": self.condition,
             "smallest_singular_value": self.smallest_singular_value,
         }
@@ -152,6 +176,8 @@ def rank_analysis(mech: Mechanism, position: np.ndarray, quaternion: np.ndarray,
         n_coordinates=n, n_equations=equations.n_joint_rows, rank=int(independent.size),
         mobility=n - int(independent.size), grubler_mobility=grubler_mobility(mech),
         redundant_labels=tuple(equations.labels[i] for i in redundant),
+        dependent_labels=tuple(equations.labels[i]
+                               for i in dependent_rows(joint_rows, int(independent.size))),
         independent=tuple(int(i) for i in independent), condition=condition,
         smallest_singular_value=smallest,
     )

@@ -196,9 +196,10 @@ def test_planar_and_spatial_fourbar_agree(adapter):
 # --- failures are results ---------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", scenario_names())
+@pytest.mark.parametrize("name", [n for n in scenario_names() if load(n).duration >= 0.2])
 def test_newton_failure_at_a_huge_step_is_a_failed_run(adapter, name):
-    """dt = 0.1 s: Exudyn's Newton gives up (measured at 0.5, 0.5, 1.1, 1.0 s)."""
+    """dt = 0.1 s: Exudyn's Newton gives up (measured at 0.5, 0.5, 1.1, 1.0 s).  Scenes shorter
+    than two such steps (andrews, 0.03 s) cannot take it."""
     mech, traj = simulate(adapter, name, "default", 0.1, load(name).duration, sample_dt=0.1)
     assert traj.status == "failed" and traj.reason
     assert 0.0 < traj.failure_time < mech.duration

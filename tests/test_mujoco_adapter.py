@@ -23,10 +23,11 @@ ADAPTER = MujocoAdapter()
 SCENARIOS = scenario_names()
 #: Cut joints MuJoCo's closure costs lead to (connect = 3 equations; see closure_equations).
 EXPECTED_CUTS = {"fourbar": ("B",), "fourbar_spatial": ("B",), "slider_crank": ("A",),
-                 "slider_crank_planar": ("A",), "double_fourbar": ("A1", "A2")}
+                 "slider_crank_planar": ("A",), "double_fourbar": ("A1", "A2"), "bricard": ("C",),
+                 "andrews": ("E3", "E4", "E6")}
 #: Redundant closure equations: a connect on a planar revolute cut has one.
 EXPECTED_REDUNDANT = {"fourbar": 1, "fourbar_spatial": 0, "slider_crank": 0,
-                      "slider_crank_planar": 1, "double_fourbar": 2}
+                      "slider_crank_planar": 1, "double_fourbar": 2, "bricard": 1, "andrews": 3}
 
 
 @pytest.fixture(scope="module", params=SCENARIOS)

@@ -34,6 +34,8 @@ EXPECTED_TREES = {
     "slider_crank": (("A",), [], 4),
     "slider_crank_planar": (("A",), ["1 redundant closure equation(s)"], 3),
     "double_fourbar": (("A1", "A2"), ["2 redundant closure equation(s)"], 5),
+    "bricard": (("C",), ["1 redundant closure equation(s)"], 5),
+    "andrews": (("E3", "E4", "E6"), ["3 redundant closure equation(s)"], 7),
 }
 
 

@@ -32,6 +32,7 @@ EXPECTED_NOTES = {
     "fourbar_spatial": "cylindrical joint 'C' built as a prismatic and a revolute joint",
     "slider_crank": "universal joint 'U' built as two revolute joints",
     "double_fourbar": "2 redundant closure equation(s)",
+    "andrews": "3 redundant closure equation(s)",
 }
 
 
