@@ -25,8 +25,10 @@ FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitionin
 
 #: What a user gets without choosing: the seed comparison's classic setting (α = β = 5).
 DEFAULT_METHOD = "rk4+baumgarte"
-#: The most accurate fixed-step setting: RK4 with position and velocity projection.
-BEST_METHOD = "rk4+direct:proj_tol=1e-13"
+#: The most accurate fixed-step setting: RK4 with position and velocity projection, Newton to
+#: round-off (near a singular position a residual ε leaves the state ~ε/ψ off the branch, see
+#: :class:`~adapters.inhouse.stabilisation.DirectCorrection`).
+BEST_METHOD = "rk4+direct:proj_tol=1e-15"
 ALIASES = {"default": DEFAULT_METHOD, "best": BEST_METHOD}
 
 

@@ -1,5 +1,5 @@
 """Small dense solves compiled with numba: at these sizes (n ≤ ~50) SciPy's wrappers cost more than
-the LAPACK call itself.  Always a factorisation (LAPACK gesv), never an explicit inverse."""
+the LAPACK call itself.  Always a factorisation (LAPACK gesv or gesdd), never an explicit inverse."""
 
 from __future__ import annotations
 
@@ -20,6 +20,15 @@ def solve_matrix(matrix, rhs):
 
 
 @njit(cache=True)
-def min_norm_correction(jacobian, residual):
-    """Φ_q⁺ r = Φ_qᵀ (Φ_q Φ_qᵀ)⁻¹ r for a full-row-rank Φ_q (m, n), r (m,)  (seed 002 eq. 126)."""
-    return jacobian.T @ np.linalg.solve(jacobian @ jacobian.T, residual)
+def truncated_solve(matrix, rhs, cut):
+    """Minimum-norm least-squares x of matrix @ x ≈ rhs with the singular values below
+    ``cut`` × the largest left out (a truncated SVD: LAPACK gesdd), matrix (m, n), rhs (m,).
+
+    Near a singular configuration the directions with tiny singular values are the ones a plain
+    solve divides by ≈ 0; dropping them leaves those rows unenforced instead of amplifying the
+    round-off and drift in them.  Exactly redundant rows (σ = 0) are dropped the same way.
+    """
+    left, values, right = np.linalg.svd(matrix, full_matrices=False)
+    keep = values > cut * values[0]
+    coefficients = (left[:, keep].T @ rhs) / values[keep]
+    return right[keep].T @ coefficients

@@ -34,6 +34,7 @@ class CoordinatePartitioning(Formulation):
                    "coordinates, solve the dependent ones by Newton; re-partition when the "
                    "dependent block is cond_ratio times worse conditioned than the best split")
     defaults = {"newton_tol": 1e-13, "newton_max_iter": 20, "cond_ratio": 1.01}
+    keeps_redundant_rows = False
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
