@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 from adapters.base import Adapter, UnsupportedCase
 from harness.capture import captured_output, engine_note
+from harness.conditioning import label_failure
 from harness.metrics import case_metrics
 from harness.model import Mechanism
 from harness.sampling import sample_times
@@ -43,7 +44,9 @@ def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
 
 def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: float,
              reference: Trajectory | None = None, bounds: Bounds = DEFAULT_BOUNDS) -> CaseResult:
-    """Simulate one case, judge it (:func:`harness.verdict.judge`) and measure it.
+    """Simulate one case, judge it (:func:`harness.verdict.judge`), say where it failed
+    (:func:`harness.conditioning.label_failure`: at a singular configuration, on an
+    overconstrained loop) and measure it.
 
     Parameters
     ----------
@@ -58,5 +61,7 @@ def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: f
     bounds : Bounds
         The verdict's bounds.
     """
-    trajectory = judge(mech, simulate_case(adapter, mech, method, dt, t_end), reference, bounds)
+    trajectory = label_failure(
+        mech, judge(mech, simulate_case(adapter, mech, method, dt, t_end), reference, bounds),
+        reference)
     return CaseResult(trajectory, case_metrics(mech, trajectory, reference))
