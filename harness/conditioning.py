@@ -79,15 +79,20 @@ class Conditioning:
 
     def near(self, time: float) -> float | None:
         """The near-singular time within :data:`SINGULAR_WINDOW_S` of ``time`` (s), or None."""
-        minima = self.minimum_times
-        if not len(minima):
-            return None
-        nearest = float(minima[np.argmin(np.abs(minima - time))])
-        return nearest if abs(nearest - time) <= SINGULAR_WINDOW_S else None
+        return nearest_passage(time, self.minimum_times)
 
     def ratio_at(self, time: float) -> float:
         """σ_r/σ_1 at the sample nearest ``time`` (s)."""
         return float(self.ratio[np.argmin(np.abs(self.times - time))])
+
+
+def nearest_passage(time: float, minimum_times: np.ndarray) -> float | None:
+    """The time in ``minimum_times`` (s) within :data:`SINGULAR_WINDOW_S` of ``time`` (s), or
+    None."""
+    if not len(minimum_times):
+        return None
+    nearest = float(minimum_times[np.argmin(np.abs(minimum_times - time))])
+    return nearest if abs(nearest - time) <= SINGULAR_WINDOW_S else None
 
 
 def conditioning(mech: Mechanism, trajectory: Trajectory, t_end: float | None = None

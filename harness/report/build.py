@@ -26,7 +26,7 @@ import pandas as pd
 
 from harness import scenario as scenarios
 from harness.reference import ReferenceError, reference_trajectory
-from harness.report import figures, mechanism, seed_compare, summary
+from harness.report import failures, figures, mechanism, seed_compare, summary
 from harness.report.summary import Table
 from harness.scenario import ScenarioError
 from harness.run_compare import compare_runs
@@ -94,6 +94,8 @@ class Report:
     cases: Table
     #: Section key → sentences on what the section leaves out and why.
     omitted: dict[str, list[str]] = field(default_factory=dict)
+    #: "Where methods fail" (:mod:`.failures`): hard or swept scenes; empty: no such section.
+    failure_scenes: list[failures.FailureScene] = field(default_factory=list)
 
     def omit(self, section: str, why: str) -> None:
         self.omitted.setdefault(section, []).append(why)
@@ -342,6 +344,8 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
             (name, [figures.work_precision(cases, name, y=y) for y in WORK_PRECISION_OUTPUTS]))
         report.stability.append(figures.stability_map(cases, sweeps, name, accuracy))
         _draw_scenario(store, name, mine, accuracy, report)
+    report.failure_scenes = failures.section_scenes(
+        cases, sweeps, accuracy, manifest, lambda why: report.omit("failures", why))
     return report
 
 

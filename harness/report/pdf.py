@@ -90,6 +90,26 @@ def _omitted(report, section: str) -> list:
     return [_text(why, _OMITTED) for why in report.omitted.get(section, [])]
 
 
+def _failures(report, width: float) -> list:
+    """The section "Where methods fail" (none when the report has no hard or swept scene)."""
+    if not report.failure_scenes:
+        return []
+    h2, h3 = _STYLES["Heading2"], _STYLES["Heading3"]
+    story = [_text("Where methods fail", h2),
+             _text("The hard scenes (tag hard) and every scene of the stability sweep: the largest "
+                   "stable step per engine and method, the outcome of every case per step size, "
+                   "and for the hard scenes the reference's conditioning σ_r/σ_1 of the joint "
+                   "Jacobian Φ_q (r: its rank at the start) with the failure times marked. The "
+                   "reading under each name is generated from the stored rows.", _SMALL)]
+    for scene in report.failure_scenes:
+        story += [_text(scene.scenario, h3),
+                  *(_text(f"• {line}", _SMALL) for line in scene.reading)]
+        if scene.conditioning is not None:
+            story.append(_figure(scene.conditioning, width))
+        story += _table(scene.stable_steps, width) + _table(scene.outcomes, width)
+    return story + _omitted(report, "failures")
+
+
 def _story(report, width: float) -> list:
     """The flowables of the whole report, in the HTML's order."""
     h1, h2, h3 = _STYLES["Title"], _STYLES["Heading2"], _STYLES["Heading3"]
@@ -115,6 +135,7 @@ def _story(report, width: float) -> list:
     for name, figs in report.work_precision:
         story += [_text(name, h3), *(_figure(fig, width) for fig in figs)]
     story += [_text("Stability maps", h2), *(_figure(fig, width) for fig in report.stability)]
+    story += _failures(report, width)
     story += [_text("Time histories", h2), *(_figure(fig, width) for fig in report.histories),
               *_omitted(report, "histories")]
     story += [_text("Model size and cost", h2), *_table(report.model_size, width)]
