@@ -192,7 +192,8 @@ max_bisections = 5
     sweep = load_campaign(write(tmp_path, text)).sweep
     assert sweep == campaign.SweepSpec(("fourbar", "slider_crank"), ("mujoco", "inhouse"),
                                        {"mujoco": ("best",), "inhouse": ("rk4+none",)},
-                                       1e-4, 1e-2, 5, {"fourbar": 0.5, "slider_crank": 1.0})
+                                       1e-4, 1e-2, 5, {"fourbar": 0.5, "slider_crank": 1.0},
+                                       {"fourbar": 0.01, "slider_crank": 0.01})
 
 
 def test_case_id_is_readable_and_uses_repr():

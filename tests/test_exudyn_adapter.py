@@ -120,12 +120,27 @@ def test_engine_model_holds_the_scenario(name, rotation):
 # --- start state ------------------------------------------------------------------------------
 
 
+#: Runs that fail at their first step, measured, with the words of their reason: Exudyn's dense
+#: LU finds the Jacobian of Bricard's overconstrained loop singular (``best`` sets
+#: ignoreSingularJacobian and runs); ``best``'s Newton tolerance (rtol 1e-12) is out of reach with
+#: the 2.5e9 N/m spring of stiff_fourbar (rtol 1e-8 runs).
+FAILS_AT_START = {
+    ("bricard", "default"): "Jacobian seems to be singular",
+    ("bricard", "default:rotation=rotvec"): "Jacobian seems to be singular",
+    ("stiff_fourbar", "best"): "reduction of step size reached minimum step size",
+}
+
+
 @pytest.mark.parametrize("name", scenario_names())
 @pytest.mark.parametrize("method", ["default", "best", "default:rotation=rotvec"])
 def test_first_sample_is_the_harness_initial_state(adapter, name, method):
     mech, traj = simulate(adapter, name, method, 1e-3, 2e-3, sample_dt=1e-3)
     start = initial_state(mech)
-    assert traj.status == "ok" and traj.n_samples == 3 and traj.times[0] == 0.0
+    if (name, method) in FAILS_AT_START:
+        assert traj.status == "failed" and FAILS_AT_START[name, method] in traj.reason
+        assert traj.n_samples == 1 and traj.times[0] == 0.0
+    else:
+        assert traj.status == "ok" and traj.n_samples == 3 and traj.times[0] == 0.0
     for field in ("position", "quaternion", "velocity", "angular_velocity"):
         np.testing.assert_allclose(getattr(traj, field)[0], getattr(start, field),
                                    rtol=0, atol=1e-12, err_msg=field)
@@ -196,10 +211,15 @@ def test_planar_and_spatial_fourbar_agree(adapter):
 # --- failures are results ---------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", [n for n in scenario_names() if load(n).duration >= 0.2])
+#: Scenes left out of the huge-step test: andrews (0.03 s) is shorter than two such steps,
+#: bricard's ``default`` fails at its first step for another reason (FAILS_AT_START), and the stiff
+#: spring holds stiff_fourbar near its start, where the implicit step converges (measured: ok).
+NOT_AT_A_HUGE_STEP = ("andrews", "bricard", "stiff_fourbar")
+
+
+@pytest.mark.parametrize("name", [n for n in scenario_names() if n not in NOT_AT_A_HUGE_STEP])
 def test_newton_failure_at_a_huge_step_is_a_failed_run(adapter, name):
-    """dt = 0.1 s: Exudyn's Newton gives up (measured at 0.5, 0.5, 1.1, 1.0 s).  Scenes shorter
-    than two such steps (andrews, 0.03 s) cannot take it."""
+    """dt = 0.1 s: Exudyn's Newton gives up (measured at 0.5, 0.5, 1.1, 1.0 s)."""
     mech, traj = simulate(adapter, name, "default", 0.1, load(name).duration, sample_dt=0.1)
     assert traj.status == "failed" and traj.reason
     assert 0.0 < traj.failure_time < mech.duration

@@ -24,10 +24,15 @@ SCENARIOS = scenario_names()
 #: Cut joints MuJoCo's closure costs lead to (connect = 3 equations; see closure_equations).
 EXPECTED_CUTS = {"fourbar": ("B",), "fourbar_spatial": ("B",), "slider_crank": ("A",),
                  "slider_crank_planar": ("A",), "double_fourbar": ("A1", "A2"), "bricard": ("C",),
-                 "andrews": ("E3", "E4", "E6")}
-#: Redundant closure equations: a connect on a planar revolute cut has one.
+                 "andrews": ("E3", "E4", "E6"), "parallelogram_fourbar": ("A",),
+                 "stiff_fourbar": ("B",)}
+#: ``connect`` equalities: one per cut, two (points on the axis) for a spatial revolute cut.
+EXPECTED_CONNECTS = {"bricard": 2}
+#: Redundant closure equations: a connect on a planar revolute cut has one; the two connects of
+#: Bricard's spatial revolute cut (6 equations for its 5) have one.
 EXPECTED_REDUNDANT = {"fourbar": 1, "fourbar_spatial": 0, "slider_crank": 0,
-                      "slider_crank_planar": 1, "double_fourbar": 2, "bricard": 1, "andrews": 3}
+                      "slider_crank_planar": 1, "double_fourbar": 2, "bricard": 1, "andrews": 3,
+                      "parallelogram_fourbar": 1, "stiff_fourbar": 1}
 
 
 @pytest.fixture(scope="module", params=SCENARIOS)
@@ -55,7 +60,7 @@ def test_build_every_scenario(case):
     mech, built = case
     assert built.tree.cut_joints == EXPECTED_CUTS[mech.name]
     assert built.model.nbody == len(mech.bodies) + 1
-    assert built.model.neq == len(built.tree.cut_joints)
+    assert built.model.neq == EXPECTED_CONNECTS.get(mech.name, len(built.tree.cut_joints))
 
 
 def test_redundant_closure_note(case):

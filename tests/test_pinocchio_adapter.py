@@ -36,6 +36,8 @@ EXPECTED_TREES = {
     "double_fourbar": (("A1", "A2"), ["2 redundant closure equation(s)"], 5),
     "bricard": (("C",), ["1 redundant closure equation(s)"], 5),
     "andrews": (("E3", "E4", "E6"), ["3 redundant closure equation(s)"], 7),
+    "parallelogram_fourbar": (("A",), ["1 redundant closure equation(s)"], 3),
+    "stiff_fourbar": (("B",), ["1 redundant closure equation(s)"], 3),
 }
 
 
