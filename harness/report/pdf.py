@@ -17,7 +17,7 @@ from reportlab.lib.pagesizes import A4
 from reportlab.lib.styles import ParagraphStyle, getSampleStyleSheet
 from reportlab.lib.units import mm
 from reportlab.platypus import (KeepTogether, PageBreak, Paragraph, Preformatted,
-                                SimpleDocTemplate, Spacer, Table as PdfTable, TableStyle)
+                                SimpleDocTemplate, Table as PdfTable, TableStyle)
 from svglib.svglib import svg2rlg
 
 from harness.report.summary import Table, cell_text
@@ -35,6 +35,11 @@ _OMITTED = ParagraphStyle("omitted", parent=_SMALL, textColor=colors.HexColor("#
 _CELL = ParagraphStyle("cell", parent=_BODY, fontSize=6.5, leading=8)
 _HEAD = ParagraphStyle("head", parent=_CELL, fontName="Helvetica-Bold")
 _CODE = ParagraphStyle("code", parent=_STYLES["Code"], fontSize=6.5, leading=8)
+#: Space after a table or figure, pt: carried by its last flowable (``spaceAfter``), which
+#: reportlab drops at the foot of a page, never by a trailing Spacer, which would open a blank
+#: page when the block ends a page exactly.
+_BLOCK_GAP = 4 * mm
+_BLOCK_NOTE = ParagraphStyle("block_note", parent=_NOTE, spaceAfter=_BLOCK_GAP)
 
 
 def _text(text: str, style=_BODY) -> Paragraph:
@@ -46,7 +51,7 @@ def _table(table: Table, width: float) -> list:
     """A report table as flowables: caption, the table (header repeated on every page), note."""
     parts = [_text(table.caption, ParagraphStyle("caption", parent=_SMALL, fontName="Helvetica-Bold"))]
     if not table.rows:
-        return parts + [_text("No rows.", _NOTE)]
+        return parts + [_text("No rows.", _BLOCK_NOTE)]
     data = [[_text(column, _HEAD) for column in table.columns]]
     data += [[_text(cell_text(value), _CELL) for value in row] for row in table.rows]
     flowable = PdfTable(data, colWidths=[width / len(table.columns)] * len(table.columns),
@@ -59,8 +64,9 @@ def _table(table: Table, width: float) -> list:
         ("TOPPADDING", (0, 0), (-1, -1), 1), ("BOTTOMPADDING", (0, 0), (-1, -1), 1)]))
     parts.append(flowable)
     if table.note:
-        parts.append(_text(table.note, _NOTE))
-    return parts + [Spacer(1, 4 * mm)]
+        return parts + [_text(table.note, _BLOCK_NOTE)]
+    flowable.spaceAfter = _BLOCK_GAP
+    return parts
 
 
 def svg_drawing(svg: str, width: float, max_height: float = MAX_FIGURE_HEIGHT) -> Drawing:
@@ -82,8 +88,8 @@ def svg_drawing(svg: str, width: float, max_height: float = MAX_FIGURE_HEIGHT) -
 
 def _figure(fig, width: float) -> KeepTogether:
     return KeepTogether([svg_drawing(fig.svg, width),
-                         Paragraph(f"<b>{escape(fig.title)}</b> {escape(fig.caption)}", _NOTE),
-                         Spacer(1, 4 * mm)])
+                         Paragraph(f"<b>{escape(fig.title)}</b> {escape(fig.caption)}",
+                                   _BLOCK_NOTE)])
 
 
 def _omitted(report, section: str) -> list:
