@@ -98,8 +98,9 @@ def case_metrics(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
 
     Output errors are max |y − y_ref| over the samples reached (rad, rad/s or m); sample times
     must lie on the reference grid (ValueError otherwise).  The energy-balance error is in J and
-    relative to :func:`harness.energy.energy_scale` of the reference (its largest kinetic energy;
-    M·|g|·ℓ for a reference at rest; ``None`` when neither exists); with a reference the work of
+    relative to :func:`harness.energy.energy_scale` of the reference (the most energy that moves
+    through it: kinetic, potential range or applied work; M·|g|·ℓ for a reference at rest;
+    ``None`` when neither exists); with a reference the work of
     dampers and spatial world torques uses the reference as a control variate
     (:func:`harness.energy.energy_balance`).
     """

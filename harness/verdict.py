@@ -8,9 +8,9 @@ and withdraws ``ok`` at the first sample where
 2. a joint gap exceeds ``gap`` × the mechanism's size :func:`characteristic_length` (m), or a joint
    orientation violation exceeds ``orientation`` (rad);
 3. the energy-balance error |e(t)| (:func:`harness.energy.energy_balance`) exceeds ``energy`` ×
-   the energy scale :func:`harness.energy.energy_scale` (J: the reference's largest kinetic
-   energy; M·|g|·ℓ for a scene at rest or without a reference; not judged, with a note, when
-   neither exists);
+   the energy scale :func:`harness.energy.energy_scale` (J: the most energy that moves through
+   the reference — its largest kinetic energy, potential-energy range or applied work; M·|g|·ℓ
+   for a scene at rest or without a reference; not judged, with a note, when neither exists);
 4. the configuration left the assembly branch of the start: it is farther than ``branch`` × the
    mechanism's size from the reference's configuration at the same value of the driver
    coordinate (see :mod:`harness.branch`).
