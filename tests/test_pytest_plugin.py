@@ -105,7 +105,7 @@ def test_user_file_passes_and_fails_with_a_readable_message(tmp_path, runner):
     times, values = result.output("crank_angle")
     difference = np.abs(values - result.reference_output("crank_angle"))
     worst = int(np.argmax(difference))
-    assert (f"case fourbar-mujoco-best-dt1e-3 (t_end 0.5 s, status ok): output crank_angle is "
+    assert ("case fourbar-mujoco-best-dt1e-3 (t_end 0.5 s, status ok): output crank_angle is "
             "not within tolerance of the reference") in done.stdout
     assert (f"worst at t = {times[worst]:g} s: value {values[worst]:.10g}, reference "
             f"{result.reference_output('crank_angle')[worst]:.10g}, difference "
