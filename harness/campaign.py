@@ -25,6 +25,7 @@ File format (times in s)::
 
     [[group]]                     # any number, at least one
     scenarios = "all"             # or a list of scenario names (scenarios/<name>.toml)
+    except = ["andrews"]          # optional, only beside "all": scenarios left out of it
     adapters = ["mujoco", "exudyn"]   # or "all" (every registered adapter)
     methods = ["default", "best"] # method strings NAME[:key=value,...] for every adapter above
     dts = [1e-2, 1e-3]            # steps, s (first-step hints of adaptive methods)
@@ -47,8 +48,9 @@ File format (times in s)::
 
 Rules checked: known keys only; scenario files that exist and load; registered adapters; method
 strings the adapter accepts (:meth:`adapters.base.Adapter.method_spec`: unknown names and unknown
-parameters are rejected; engines are imported only for the adapters a file names); steps finite,
-> 0 and dividing the evaluation step 0.01 s (:func:`harness.sampling.steps_per_sample`) and every
+parameters are rejected; engines are imported only for the adapters a file names); ``except``
+names scenarios of ``"all"``; steps finite, > 0 and dividing each scenario's evaluation step (its
+``sample_step``, 0.01 s unless the scene sets it; :func:`harness.sampling.steps_per_sample`) and every
 duration they are used with (t_end an integer multiple of dt, :data:`adapters.base.GRID_RTOL`);
 durations finite, > 0 and not beyond the scenario's own (its reference ends there); repetitions an
 integer >= 1, timeout and accuracy > 0.
@@ -88,8 +90,9 @@ EVERY_SCENARIO = "*"
 
 _TOP_KEYS = {"description", "repetitions", "timeout_s", "accuracy", "calibration", "bounds",
              "t_end", "group", "sweep"}
-_GROUP_KEYS = {"scenarios", "adapters", "methods", "dts", "repetitions", "timeout_s", "t_end"}
-_SWEEP_KEYS = {"scenarios", "adapters", "methods", "dt_min", "dt_max", "max_bisections"}
+_GROUP_KEYS = {"scenarios", "except", "adapters", "methods", "dts", "repetitions", "timeout_s",
+               "t_end"}
+_SWEEP_KEYS = {"scenarios", "except", "adapters", "methods", "dt_min", "dt_max", "max_bisections"}
 _BOUND_KEYS = {f.name for f in fields(Bounds)}
 
 
@@ -358,10 +361,29 @@ class _Reader:
         return value
 
     def _scenarios(self, table: dict, path: str) -> list[tuple[str, Mechanism]]:
-        names = self._names(table, "scenarios", path, scenario.scenario_names())
+        names = self._without_excepted(
+            table, path, self._names(table, "scenarios", path, scenario.scenario_names()))
         found = [(n, self._mechanism(n, f"{_join(path, 'scenarios')}[{i}]"))
                  for i, n in enumerate(names)]
         return [(n, mech) for n, mech in found if mech is not None]
+
+    def _without_excepted(self, table: dict, path: str, names: list[str]) -> list[str]:
+        """``names`` less the table's ``except`` list, which only ``scenarios = "all"`` takes and
+        which must name scenarios of it; problems recorded, ``names`` unchanged then."""
+        if "except" not in table:
+            return names
+        field, left_out = _join(path, "except"), table["except"]
+        if table.get("scenarios") != "all":
+            self.c.add(field, 'allowed only with scenarios = "all"')
+            return names
+        if not isinstance(left_out, list) or not all(isinstance(n, str) for n in left_out):
+            self.c.add(field, f"expected a list of scenario names, got {left_out!r}")
+            return names
+        for i, name in enumerate(left_out):
+            if name not in names:
+                self.c.add(f"{field}[{i}]", f"unknown scenario {name!r} (known: "
+                           f"{', '.join(names)})")
+        return [name for name in names if name not in left_out]
 
     def _methods(self, table: dict, path: str) -> dict[str, list[str]]:
         """Adapter → method strings, from ``adapters`` + a ``methods`` list or a ``methods``

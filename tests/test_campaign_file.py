@@ -106,6 +106,13 @@ def test_every_mistake_is_named_with_file_and_field(tmp_path):
      "group[0].methods.nope", "unknown adapter 'nope'"),
     ("[[group]]\nscenarios = 'all'\nmethods = { inhouse = ['rk4+direct:proj_tol=abc'] }\n"
      "dts = [1e-2]", "group[0].methods.inhouse[0]", "expects a number"),
+    ("[[group]]\nscenarios = ['fourbar']\nexcept = ['fourbar']\nmethods = { inhouse = ['best'] }"
+     "\ndts = [1e-2]", "group[0].except", 'allowed only with scenarios = "all"'),
+    ("[[group]]\nscenarios = 'all'\nexcept = 'andrews'\nmethods = { inhouse = ['best'] }\n"
+     "dts = [1e-3]", "group[0].except", "expected a list of scenario names"),
+    ("[[group]]\nscenarios = 'all'\nexcept = ['andrews', 'nowhere']\n"
+     "methods = { inhouse = ['best'] }\ndts = [1e-2]", "group[0].except[1]",
+     "unknown scenario 'nowhere'"),
 ])
 def test_single_mistakes(tmp_path, text, field, words):
     with pytest.raises(CampaignError) as caught:
@@ -178,6 +185,14 @@ def test_a_case_repeated_by_a_later_group_keeps_the_first_groups_settings(tmp_pa
     first = [c for c in loaded.cases if c.case_id == "fourbar|inhouse|best|0.01|0.5"]
     assert first == [CaseSpec("fourbar", "inhouse", "best", 1e-2, 0.5, 3, 30.0)]
     assert len(loaded.cases) == 9
+
+
+def test_all_but_the_excepted_scenarios_expand(tmp_path):
+    text = ('[[group]]\nscenarios = "all"\nexcept = ["andrews", "bricard"]\n'
+            'methods = { inhouse = ["best"] }\ndts = [1e-2]\n')
+    cases = load_campaign(write(tmp_path, text)).cases
+    assert [c.scenario for c in cases] == [n for n in scenario.scenario_names()
+                                           if n not in ("andrews", "bricard")]
 
 
 def test_sweep_is_read_with_its_durations(tmp_path):
