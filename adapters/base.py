@@ -25,7 +25,8 @@ status (the classification is in :mod:`harness.trajectory`):
 passed the checks (the stepper's own per-step checks where it has them, :attr:`Stepper.t_good`,
 else the last state this loop read and checked).  Every sample before it is kept.  A failure
 before the engine holds its start state gives no samples and ``failure_time`` 0.0.  Wall time is
-measured around the stepping only (``Stepper._step_to``), not around reading states.
+measured around the stepping only (``Stepper._step_to``); the time spent reading states back
+(``Stepper._states``) is ``Trajectory.read_back_s``.
 """
 
 from __future__ import annotations
@@ -232,7 +233,7 @@ class Stepper(abc.ABC):
         """Step through every sample time and on to ``grid.t_end``; every way the run ends
         becomes a status (see the module notes)."""
         times, states = [], []
-        last_good, wall = 0.0, 0.0
+        last_good, wall, read_back = 0.0, 0.0, 0.0
         status, reason, failure_time = "ok", "", None
         targets = list(grid.sample_times)
         if not targets or targets[-1] < grid.t_end * (1 - GRID_RTOL):
@@ -244,7 +245,9 @@ class Stepper(abc.ABC):
                     self._step_to(float(t))
                 finally:
                     wall += time.perf_counter() - began
+                began = time.perf_counter()
                 current = self._states(float(t))
+                read_back += time.perf_counter() - began
                 bad = divergence_reason(current) or self.divergence(current)
                 if bad:
                     raise _CheckFailed(bad)
@@ -259,7 +262,8 @@ class Stepper(abc.ABC):
         except Exception as error:  # an engine failure is a result, not a crash (DESIGN rule 6)
             status, reason, failure_time = "failed", describe(error), self._last_good(last_good)
         run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
-                   steps=self.steps, counters=self.counters(), notes=list(self.notes))
+                   read_back_s=read_back, steps=self.steps, counters=self.counters(),
+                   notes=list(self.notes))
         if not states:
             return Trajectory.empty(n_bodies, **run)
         return Trajectory.from_samples(times, states, **run)
@@ -370,6 +374,19 @@ class Adapter(abc.ABC):
         """
         return {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
                 "notes": f"the {self.name} adapter does not report its model size"}
+
+    def bare_loop(self, model, method: str, dt: float, n_steps: int) -> float:
+        """Wall time (s) of the engine's own stepping loop alone: ``n_steps`` steps of ``method``
+        from the harness's assembled start, with the settings :meth:`simulate` uses, but no
+        samples, no state read-back and no per-step checks — the yardstick of the adapter's
+        overhead (``mbh bench`` prints simulate's time per step over this one's).
+
+        Raises
+        ------
+        UnsupportedCase
+            When the adapter has no bare loop for this method (this default).
+        """
+        raise UnsupportedCase(f"the {self.name} adapter has no bare loop to time")
 
     def simulate(self, model, method: str, dt: float, t_end: float,
                  sample_times: np.ndarray) -> Trajectory:

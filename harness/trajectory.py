@@ -64,6 +64,9 @@ class Trajectory:
         checks) of a run that did not end ``ok``, s; None when it did.
     wall_time_s : float
         Wall time around the stepping only, s.
+    read_back_s : float
+        Wall time spent reading body states back at the samples, s (not in ``wall_time_s``;
+        printed by ``mbh bench``, not stored).
     steps : int
         Integrator steps taken.
     counters : dict
@@ -82,6 +85,7 @@ class Trajectory:
     reason: str = ""
     failure_time: float | None = None
     wall_time_s: float = 0.0
+    read_back_s: float = 0.0
     steps: int = 0
     counters: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
