@@ -24,7 +24,7 @@ from numba import njit
 from adapters.inhouse import kernels
 from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import truncated_solve
+from adapters.inhouse.linalg import certified_spd_solve, truncated_solve
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
@@ -236,7 +236,9 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     solved by :func:`truncated_solve` at ``cut``: at a singular configuration the multiplier of
     the lost direction grows like 1/σ while its force Φ_qᵀμ stays finite, and a plain LU of
     eq. 77 turns round-off there into acceleration spikes (the error grows as dt shrinks).
-    Redundant rows (σ = 0 everywhere) need no elimination beforehand.
+    Redundant rows (σ = 0 everywhere) need no elimination beforehand.  Where the matrix is
+    certified far from the cut (:func:`~adapters.inhouse.linalg.certified_spd_solve`, the common
+    case) a Cholesky solve replaces the SVD, and planar (diagonal) mass matrices use M⁻¹ directly.
 
     Parameters
     ----------
@@ -252,6 +254,15 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     ndarray, shape (n,)
     """
     n, m = mass.shape[0], jacobian.shape[0]
+    if m > 0 and _is_positive_diagonal(mass):
+        # Planar bodies: M⁻¹ is exact and cheap; S = Φ_q M⁻¹ Φ_qᵀ.  When S is certified far from
+        # the cut the solution is the same as the M̃ form's (unique; to round-off).
+        inverse = 1.0 / np.diag(mass)
+        weighted = jacobian * inverse
+        certified, mu = certified_spd_solve(weighted @ jacobian.T,
+                                            gamma - weighted @ force, cut)
+        if certified:
+            return inverse * (force + jacobian.T @ mu)
     scale = np.sum(jacobian * jacobian)
     rho = np.trace(mass) / scale if scale > 0.0 else 0.0
     augmented = mass + rho * (jacobian.T @ jacobian)
@@ -262,8 +273,24 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     free, columns = solved[:, 0], np.ascontiguousarray(solved[:, 1:])
     if m == 0:
         return free
-    mu = truncated_solve(jacobian @ columns, gamma - jacobian @ free, cut)
+    reduced, residual = jacobian @ columns, gamma - jacobian @ free
+    certified, mu = certified_spd_solve(reduced, residual, cut)
+    if not certified:
+        mu = truncated_solve(reduced, residual, cut)
     return free + columns @ mu
+
+
+@njit(cache=True)
+def _is_positive_diagonal(matrix):
+    """True when a square matrix is diagonal with positive entries (planar mass matrices)."""
+    k = matrix.shape[0]
+    for i in range(k):
+        if not matrix[i, i] > 0.0:
+            return False
+        for j in range(k):
+            if i != j and matrix[i, j] != 0.0:
+                return False
+    return True
 
 
 @njit(cache=True)
@@ -276,8 +303,13 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
     :attr:`Dynamics.kernel_args`.
     """
     mass, force = mass_and_forces_kernel(q, v, *dynamics_args)
-    jac = kernels.jacobian(q, t, *constraint_args)[rows]
-    target = kernels.gamma(q, v, t, *constraint_args)[rows]
+    every_row = rows.shape[0] == constraint_args[-1]
+    jac = kernels.jacobian(q, t, *constraint_args)
+    target = kernels.gamma(q, v, t, *constraint_args)
+    if not every_row:
+        jac, target = jac[rows], target[rows]
     if alpha != 0.0 or beta != 0.0:
-        target = target - 2.0 * alpha * (jac @ v) - beta * beta * kernels.phi(q, t, *constraint_args)[rows]
+        residual = kernels.phi(q, t, *constraint_args)
+        target = target - 2.0 * alpha * (jac @ v) - beta * beta * (
+            residual if every_row else residual[rows])
     return range_space_acceleration(mass, jac, force, target, ACCELERATION_CUT)

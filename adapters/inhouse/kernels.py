@@ -59,9 +59,11 @@ def _rot_target_rate(k, tab_uj, tab_gj, theta, rate):
 
 
 @njit(cache=True)
-def _add_block(jac, r, q, nc, body, block_row):
+def _add_block(jac, r, q, nc, body, block_row, sign=1.0):
     if body >= 0:
-        jac[r, body * nc:(body + 1) * nc] += block_row
+        k = body * nc
+        for c in range(nc):
+            jac[r, k + c] += sign * block_row[c]
 
 
 @njit(cache=True)
@@ -109,7 +111,7 @@ def jacobian(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
             jj = point_jacobian(q, nc, j, uj[k])
             for a in range(dim):
                 _add_block(jac, r + a, q, nc, i, ji[a])
-                _add_block(jac, r + a, q, nc, j, -jj[a])
+                _add_block(jac, r + a, q, nc, j, jj[a], -1.0)
         elif kd == DOT_VV or kd == DRIVE_ROT:
             wj = uj[k] if kd == DOT_VV else _rot_target(k, uj, gj, theta)
             a_i = rotate(q, nc, i, ui[k])

@@ -30,7 +30,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
-from adapters.inhouse.linalg import truncated_solve
+from adapters.inhouse.linalg import min_norm_solve
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
 from harness.model import Mechanism
@@ -237,13 +237,12 @@ class _Projection(Formulation):
         super().__init__(mech, q0, dt, **params)
         values = np.linalg.svd(self.jacobian(0.0, q0), compute_uv=False)
         rank = np.count_nonzero(values > RANK_TOLERANCE * max(values[0], 1.0))
-        self._cut = float(self.params["singular_cut"]) * float(values[rank - 1] / values[0])
+        self.cut = float(self.params["singular_cut"]) * float(values[rank - 1] / values[0])
 
     def _min_norm(self, jac, residual):
         """Φ_q⁺ r (eq. 126), truncated (see the class docstring)."""
         self.counters["factorizations"] += 1
-        return truncated_solve(np.ascontiguousarray(jac), np.ascontiguousarray(residual),
-                               self._cut)
+        return min_norm_solve(np.ascontiguousarray(jac), np.ascontiguousarray(residual), self.cut)
 
     def warm_up(self, q, v):
         super().warm_up(q, v)
