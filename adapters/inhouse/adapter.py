@@ -4,14 +4,20 @@ Method names are ``INTEGRATOR+STABILISATION[:key=value,...]`` (e.g. ``rk4+baumga
 ``bdf4+direct:tol=1e-5``, ``dop853+partition:rtol=1e-12``), plus ``ida[:...]`` (the DAE solver) and
 the aliases ``default`` and ``best``.  Parameters go to whichever part declares them; the
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
-Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).
+Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
+one-step methods with ``none``, ``baumgarte`` or ``direct`` run compiled from sample to sample
+(``loop=compiled``, the default; ``loop=python`` steps the same arithmetic from Python).
 """
 
 from __future__ import annotations
 
 import itertools
+import time
+
+import numpy as np
 
 from adapters.base import Adapter, MethodSpec, RunGrid, Stepper, UnsupportedCase, parse_method
+from adapters.inhouse.compiled_stepper import LOOPS, CompiledStepper, has_compiled_path
 from adapters.inhouse.driver import InhouseStepper
 from adapters.integrators import integrator_class, integrator_names, integrator_params
 from adapters.inhouse.newton_euler import NewtonEuler
@@ -44,6 +50,17 @@ def _split(name: str) -> tuple[str, str]:
     return integrator, strategy
 
 
+def _spec(integrator: str, strategy: str) -> MethodSpec:
+    """The method ``integrator+strategy`` with the parameters of both parts; methods with a
+    compiled path add ``loop`` (``compiled``, the default, or ``python``: the same arithmetic,
+    stepped from Python; :mod:`adapters.inhouse.compiled_stepper`)."""
+    formulation = FORMULATIONS[strategy]
+    params = {**integrator_params(integrator), **formulation.defaults}
+    if has_compiled_path(integrator, strategy):
+        params["loop"] = LOOPS[0]
+    return MethodSpec(f"{integrator}+{strategy}", formulation.description, params)
+
+
 class InhouseAdapter(Adapter):
     """The project's own absolute-coordinate formulation (seeds 000 and 002)."""
 
@@ -57,10 +74,7 @@ class InhouseAdapter(Adapter):
         specs = [MethodSpec("default", f"alias of {DEFAULT_METHOD}"),
                  MethodSpec("best", f"alias of {BEST_METHOD}")]
         for integrator, strategy in itertools.product(integrator_names(), FORMULATIONS):
-            formulation = FORMULATIONS[strategy]
-            specs.append(MethodSpec(
-                f"{integrator}+{strategy}", formulation.description,
-                {**integrator_params(integrator), **formulation.defaults}))
+            specs.append(_spec(integrator, strategy))
         from adapters.inhouse.dae import ida_params
         specs.append(MethodSpec("ida", "SUNDIALS IDA (scikit-sundae) on the DAE", ida_params()))
         return specs
@@ -75,9 +89,7 @@ class InhouseAdapter(Adapter):
             from adapters.inhouse.dae import ida_params
             spec = MethodSpec("ida", "SUNDIALS IDA on the DAE", ida_params())
             return spec, spec.resolve(given)
-        integrator, strategy = _split(name)
-        spec = MethodSpec(name, FORMULATIONS[strategy].description,
-                          {**integrator_params(integrator), **FORMULATIONS[strategy].defaults})
+        spec = _spec(*_split(name))
         return spec, spec.resolve(given)
 
     def build(self, mechanism: Mechanism) -> Mechanism:
@@ -102,9 +114,24 @@ class InhouseAdapter(Adapter):
         return model
 
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
+        if params.get("loop", "compiled") not in LOOPS:
+            raise ValueError(f"parameter 'loop' of {spec.name!r} must be one of "
+                             f"{', '.join(LOOPS)}, got {params['loop']!r}")
         if spec.name == "ida":
             from adapters.inhouse.dae import check_ida_params
             check_ida_params(params)
+
+    def bare_loop(self, model: Mechanism, method: str, dt: float, n_steps: int) -> float:
+        """The compiled loop alone: ``n_steps`` steps in one call (methods with ``loop=compiled``;
+        the Python path has no loop apart from the adapter's)."""
+        spec, params = self.method_spec(method)
+        if params.get("loop") != "compiled":
+            raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
+                                  "the adapter's")
+        stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
+        began = time.perf_counter()
+        stepper._step_to(n_steps * dt)
+        return time.perf_counter() - began
 
     def _fixed_step(self, spec: MethodSpec, params: dict) -> bool:
         return spec.name != "ida" and not integrator_class(_split(spec.name)[0]).adaptive
@@ -118,8 +145,10 @@ class InhouseAdapter(Adapter):
         if reason:
             raise UnsupportedCase(reason)
         own = {k: v for k, v in params.items() if k in formulation.defaults}
-        rest = {k: v for k, v in params.items() if k not in formulation.defaults}
-        return InhouseStepper(model, formulation, integrator, rest, own, grid)
+        rest = {k: v for k, v in params.items() if k not in formulation.defaults and k != "loop"}
+        loop = params.get("loop", "python")
+        stepper = CompiledStepper if loop == "compiled" else InhouseStepper
+        return stepper(model, formulation, integrator, rest, own, grid)
 
 
 class _IdaStepper(Stepper):
