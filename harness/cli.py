@@ -271,6 +271,69 @@ def cmd_run(args) -> int:
     return 0
 
 
+BENCH_PARTS = ("front", "overhead", "scaling", "references")
+
+
+def _number(value, digits: int = 3) -> str:
+    return "-" if value is None else f"{value:.{digits}g}"
+
+
+def cmd_bench(args) -> int:
+    """The speed figures of :mod:`harness.bench`, measured in this run, printed as tables."""
+    from harness import bench
+
+    parts = args.parts.split(",")
+    unknown = sorted(set(parts) - set(BENCH_PARTS))
+    if unknown:
+        raise UserError(f"--parts: unknown part(s) {', '.join(unknown)} (valid: "
+                        f"{', '.join(BENCH_PARTS)})")
+    if "front" in parts:
+        _bench_front(args)
+    if "overhead" in parts:
+        print("\nadapter time per step / bare loop time per step (dt 1e-3 s, 1 s, best of 5)")
+        rows = bench.overhead_rows()
+        _print_table([{**r, **{k: _number(r[k]) for k in ("adapter_us_per_step", "bare_us_per_step",
+                                                          "ratio", "read_back_us_per_sample")}}
+                      for r in rows], ["adapter", "scenario", "method", "adapter_us_per_step",
+                                       "bare_us_per_step", "ratio", "read_back_us_per_sample",
+                                       "note"])
+    if "scaling" in parts:
+        members = tuple(n for n in bench.SCALING_N if n <= args.scaling_max)
+        print(f"\ncost per simulated second on n_fourbar@N (best, dt 1e-3 s, 0.5 s), s/s")
+        rows, exponents = bench.scaling_rows(members=members)
+        table = {}
+        for row in rows:
+            table.setdefault(row["adapter"], {"adapter": row["adapter"]})[f"N={row['N']}"] = \
+                _number(row["s_per_sim_s"]) if row["status"] == "ok" else row["status"]
+        for name, row in table.items():
+            row["exponent (N>=4)"] = _number(exponents[name])
+        _print_table(list(table.values()), ["adapter", *(f"N={n}" for n in members),
+                                            "exponent (N>=4)"])
+    if "references" in parts:
+        print("\nreference build time per route, s (stored: when built; now: this run)")
+        rows = bench.reference_rows()
+        _print_table([{**r, "stored_s": _number(r["stored_s"]), "now_s": _number(r["now_s"])}
+                      for r in rows], ["scenario", "route", "stored_s", "now_s"])
+    return 0
+
+
+def _bench_front(args) -> None:
+    from harness.campaign import load_campaign
+    from harness.report.summary import front_ratio_table
+    from harness.runner import run_campaign
+
+    store = run_campaign(load_campaign("bench"), workers=args.workers, root=_results_root(args),
+                         quiet=True)
+    cases = store.cases()
+    print(f"fronts from run {store.run_id} ({len(cases)} cases, {_status_counts(cases)})")
+    for name in ("fourbar", "slider_crank"):
+        table = front_ratio_table(cases, name)
+        print(f"\n{table.caption}")
+        rows = [dict(zip(table.columns, (_number(v) if isinstance(v, float) else v
+                                         for v in row))) for row in table.rows]
+        _print_table(rows, list(table.columns))
+
+
 def cmd_runs(args) -> int:
     from harness.store import list_runs
 
@@ -425,6 +488,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar, no notes")
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_run)
+
+    p = sub.add_parser("bench", help="speed: in-house front vs the best engine, adapter "
+                                     "overheads, scaling on n_fourbar@N, reference build times")
+    p.add_argument("--parts", default=",".join(BENCH_PARTS),
+                   help=f"comma-separated subset of {', '.join(BENCH_PARTS)} (default: all)")
+    p.add_argument("--workers", type=_positive_int, default=None,
+                   help="worker processes of the front campaign (default: the cores)")
+    p.add_argument("--scaling-max", type=_positive_int, default=64,
+                   help="largest N of the scaling table (default 64)")
+    p.add_argument("--root", default=None, help=root_help)
+    p.set_defaults(func=cmd_bench)
 
     p = sub.add_parser("runs", help="list the stored runs, oldest first")
     p.add_argument("--json", action="store_true", help=JSON_HELP)

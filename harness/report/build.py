@@ -324,7 +324,8 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
         against=against, built_at=built_at or build_time(),
         command=f"mbh run {manifest.get('campaign', '')}   # made run {run_id}\n{command}",
         accuracy=accuracy, scenarios=names,
-        fastest=[summary.fastest_table(cases, name, calibration) for name in names],
+        fastest=[summary.fastest_table(cases, name, calibration) for name in names]
+        + [summary.front_ratio_table(cases, name) for name in names if _has_front(cases, name)],
         pareto=summary.pareto_table(cases),
         status_counts=summary.status_counts_table(cases), failures=summary.failures_table(cases),
         changes=None, work_precision=[], stability=[], histories=[],
@@ -384,6 +385,12 @@ def render_html(report: Report) -> str:
 
 def _asset(name: str) -> str:
     return (_TEMPLATES / name).read_text(encoding="utf-8")
+
+
+def _has_front(cases, scenario: str) -> bool:
+    """Whether the run has both in-house and engine cases on ``scenario`` to set side by side."""
+    adapters = set(cases.loc[cases["scenario"] == scenario, "adapter"])
+    return summary.INHOUSE in adapters and len(adapters) > 1
 
 
 def build_report(run_id: str, against: str | None = None, formats=FORMATS,

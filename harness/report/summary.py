@@ -117,6 +117,42 @@ def fastest_table(cases: pd.DataFrame, scenario: str, calibration_s: float | Non
         note="The Pareto front read at each level: no case that reaches the level is faster.")
 
 
+#: The adapter whose front :func:`front_ratio_table` sets against the engines'.
+INHOUSE = "inhouse"
+
+
+def front_ratio_table(cases: pd.DataFrame, scenario: str, levels=ACCURACY_LEVELS) -> Table:
+    """The in-house Pareto front against the engines': per accuracy level on ``scenario``, the
+    fastest ``ok`` in-house case reaching it, the fastest ``ok`` engine case reaching it, and the
+    ratio of their wall times (in-house / engine; below 1: the in-house formulation is faster)."""
+    mine = cases[cases["scenario"] == scenario]
+    own, engines = mine[mine["adapter"] == INHOUSE], mine[mine["adapter"] != INHOUSE]
+    rows = []
+    for level in levels:
+        ours, theirs = reaching(own, level), reaching(engines, level)
+        ours = None if ours.empty else ours.iloc[0]
+        theirs = None if theirs.empty else theirs.iloc[0]
+        ratio = (float(ours["wall_time_s"]) / float(theirs["wall_time_s"])
+                 if ours is not None and theirs is not None else None)
+        rows.append((level, *_front_pick(ours), *_front_pick(theirs, with_adapter=True), ratio))
+    return Table(
+        key=f"front-{slug(scenario)}",
+        caption=f"{scenario}: in-house front against the fastest engine at each accuracy level",
+        columns=("level", "in-house method", "dt (s)", "wall time (s)", "engine",
+                 "engine method", "engine dt (s)", "engine wall time (s)",
+                 "in-house / engine time"),
+        rows=tuple(rows),
+        note="Each side's fastest ok case whose main-output error is within the level; an empty "
+             "side reaches no case at that level.")
+
+
+def _front_pick(case, with_adapter: bool = False) -> tuple:
+    if case is None:
+        return (None,) * (4 if with_adapter else 3)
+    picked = (_plain(case["method"]), _plain(case["dt"]), _plain(case["wall_time_s"]))
+    return ((_plain(case["adapter"]),) if with_adapter else ()) + picked
+
+
 def pareto_table(cases: pd.DataFrame, levels=ACCURACY_LEVELS) -> Table:
     """Per scenario (rows) and accuracy level (columns): ``"adapter method dt=…"`` of the fastest
     ``ok`` case reaching the level (None when no case does)."""
