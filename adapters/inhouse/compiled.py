@@ -22,7 +22,7 @@ from numba import njit
 
 from adapters.inhouse import kernels
 from adapters.inhouse.dynamics import index1_acceleration
-from adapters.inhouse.linalg import min_norm_solve
+from adapters.inhouse.banded import min_norm_correction, pattern_matvec
 
 RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG = range(4)
 
@@ -42,7 +42,8 @@ def _rows_max_abs(values):
 
 
 @njit(cache=True)
-def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, counters):
+def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, sparsity_arrays,
+             counters):
     """Direct violation correction (002 eq. 127 and 137) with the truncated pseudo-inverse;
     the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project`."""
     for _ in range(proj_max_iter):
@@ -53,25 +54,28 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, count
         counters[JACOBIAN_EVALS] += 1
         counters[FACTORIZATIONS] += 1
         jac = np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
-        q = q - min_norm_solve(jac, residual, cut)
+        q = q - min_norm_correction(jac, residual, cut, sparsity_arrays)
     counters[JACOBIAN_EVALS] += 1
     counters[FACTORIZATIONS] += 1
     jac = np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
-    v = v - min_norm_solve(jac, jac @ v, cut)
+    v = v - min_norm_correction(jac, pattern_matvec(jac, sparsity_arrays[0], v), cut,
+                                sparsity_arrays)
     return q, v
 
 
 @njit(cache=True)
-def _acceleration(q, v, t, gains, rows, constraint_args, dynamics_args, counters):
+def _acceleration(q, v, t, gains, rows, constraint_args, dynamics_args, sparsity_arrays,
+                  counters):
     counters[RHS_EVALS] += 1
     counters[JACOBIAN_EVALS] += 1
     counters[FACTORIZATIONS] += 1
-    return index1_acceleration(q, v, t, gains[0], gains[1], rows, constraint_args, dynamics_args)
+    return index1_acceleration(q, v, t, gains[0], gains[1], rows, constraint_args, dynamics_args,
+                               sparsity_arrays)
 
 
 @njit(cache=True)
 def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args, dynamics_args,
-                  counters):
+                  sparsity_arrays, counters):
     """One step of :func:`adapters.integrators.nystrom.nystrom_step` (same operation order)."""
     stages = np.empty((c.shape[0], v.shape[0]))
     for i in range(c.shape[0]):
@@ -83,7 +87,7 @@ def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args,
             if a[i, j] != 0.0:
                 v_stage = v_stage + (h * a[i, j]) * stages[j]
         stages[i] = _acceleration(q + dq, v_stage, t + c[i] * h, gains, rows, constraint_args,
-                                  dynamics_args, counters)
+                                  dynamics_args, sparsity_arrays, counters)
     dq = h * v
     v_new = v
     for j in range(c.shape[0]):
@@ -96,7 +100,7 @@ def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args,
 
 @njit(cache=True)
 def run_steps(q, v, t0, dt, first, last, tableau, gains, stabilisation, proj_tol, proj_max_iter,
-              cut, limit, rows, constraint_args, dynamics_args, counters):
+              cut, limit, rows, constraint_args, dynamics_args, sparsity_arrays, counters):
     """Steps ``first + 1 … last`` of a fixed-step run from the state (q, q̇) after step ``first``.
 
     Parameters
@@ -118,8 +122,9 @@ def run_steps(q, v, t0, dt, first, last, tableau, gains, stabilisation, proj_tol
         Divergence limit on the 2-norms of q and q̇.
     rows : ndarray of int, shape (r,)
         Constraint rows in the solves.
-    constraint_args, dynamics_args : tuple
-        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`.
+    constraint_args, dynamics_args, sparsity_arrays : tuple
+        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
+        :attr:`ConstraintSystem.sparsity`'s arrays.
     counters : ndarray of int64, shape (4,)
         Incremented in place (:data:`RHS_EVALS` …).
 
@@ -139,10 +144,11 @@ def run_steps(q, v, t0, dt, first, last, tableau, gains, stabilisation, proj_tol
         t_new = t0 + (k + 1) * dt
         try:
             q_new, v_new = _nystrom_step(q, v, t, t_new - t, c, a, abar, b, bbar, gains, rows,
-                                         constraint_args, dynamics_args, counters)
+                                         constraint_args, dynamics_args, sparsity_arrays,
+                                         counters)
             if stabilisation == PROJECTED:
                 q_new, v_new = _project(q_new, v_new, t_new, rows, proj_tol, proj_max_iter, cut,
-                                        constraint_args, counters)
+                                        constraint_args, sparsity_arrays, counters)
         except Exception:  # noqa: BLE001 — LAPACK failures end the run as "failed"
             return q, v, k, FAILED_LINALG
         squared_q, squared_v = q_new @ q_new, v_new @ v_new

@@ -78,7 +78,8 @@ class CompiledStepper(Stepper):
             int(formulation.params["proj_max_iter"]) if projected else 0,
             float(formulation.cut) if projected else 0.0,
             self._limit, np.ascontiguousarray(formulation.rows),
-            formulation.constraints.kernel_args, formulation.dynamics.kernel_args)
+            formulation.constraints.kernel_args, formulation.dynamics.kernel_args,
+            formulation.constraints.sparsity.arrays)
         self._run(0)  # compile (or load from numba's cache) outside the timed stepping
 
     def _run(self, last: int):

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adapters.inhouse import kernels
+from adapters.inhouse.banded import Sparsity, sparsity
 from adapters.inhouse.bodykin import PLANAR_NC, SPATIAL_NC
 from harness.model import GROUND, Joint, Mechanism
 
@@ -179,7 +180,17 @@ class ConstraintSystem:
             _add_driver(tb, mech.joint(mech.initial.driver))
         self.m = tb.m
         self.labels = tuple(tb.labels)
-        self._args = (self.layout.nc, *tb.arrays().values(), np.asarray(drive, dtype=float), self.m)
+        arrays = tb.arrays()
+        self._args = (self.layout.nc, *arrays.values(), np.asarray(drive, dtype=float), self.m)
+        self._row_bodies = _row_bodies(arrays, self.m, 2 if mech.planar else 3)
+        self._sparsity = None
+
+    @property
+    def sparsity(self) -> Sparsity:
+        """Where Φ_q can be non-zero and a banded row order (:mod:`adapters.inhouse.banded`)."""
+        if self._sparsity is None:
+            self._sparsity = sparsity(self._row_bodies, self.layout.n_bodies, self.layout.nc)
+        return self._sparsity
 
     @property
     def kernel_args(self) -> tuple:
@@ -201,6 +212,15 @@ class ConstraintSystem:
     def gamma(self, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
         """γ, shape (m,)."""
         return kernels.gamma(q, v, t, *self._args)
+
+
+def _row_bodies(arrays: dict, m: int, dim: int) -> np.ndarray:
+    """Bodies (i, j) of each equation row, −1 for ground or none, shape (m, 2)."""
+    bodies = np.full((m, 2), -1, dtype=np.int64)
+    for kind, i, j, row in zip(arrays["kind"], arrays["bi"], arrays["bj"], arrays["row"]):
+        n_rows = dim if kind == kernels.POINT else 1
+        bodies[row:row + n_rows] = (i, -1 if kind == kernels.NORM else j)
+    return bodies
 
 
 def reference_coordinates(mech: Mechanism) -> np.ndarray:

@@ -22,6 +22,8 @@ import numpy as np
 from numba import njit
 
 from adapters.inhouse import kernels
+from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_matvec,
+                                     pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.linalg import certified_spd_solve, truncated_solve
@@ -38,25 +40,46 @@ def g_bar(theta):
 
 
 @njit(cache=True)
-def _mass_and_inertial_forces(q, v, nc, masses, inertias, gravity):
-    """M(q) (n, n) and Q_v + gravity (n,)."""
+def _mass_matrix(q, nc, masses, inertias):
+    """M(q), shape (n, n) (002 eq. 55–61)."""
     n = q.shape[0]
     mass = np.zeros((n, n))
-    force = np.zeros(n)
     for b in range(masses.shape[0]):
         k = b * nc
-        m = masses[b]
         for a in range(3 if nc != PLANAR_NC else 2):
-            mass[k + a, k + a] = m
-            force[k + a] = m * gravity[a]
+            mass[k + a, k + a] = masses[b]
         if nc == PLANAR_NC:
             mass[k + 2, k + 2] = inertias[b, 2, 2]
             continue
         g = g_bar(q[k + 3:k + 7])
         mass[k + 3:k + 7, k + 3:k + 7] = g.T @ inertias[b] @ g
+    return mass
+
+
+@njit(cache=True)
+def planar_mass_diagonal(masses, inertias):
+    """The diagonal (m, m, I_zz) per body of a planar M, shape (3 b,)."""
+    diagonal = np.empty(3 * masses.shape[0])
+    for b in range(masses.shape[0]):
+        diagonal[3 * b] = diagonal[3 * b + 1] = masses[b]
+        diagonal[3 * b + 2] = inertias[b, 2, 2]
+    return diagonal
+
+
+@njit(cache=True)
+def _inertial_forces(q, v, nc, masses, gravity, inertias):
+    """Q_v + gravity, shape (n,) (002 eq. 62–63)."""
+    force = np.zeros(q.shape[0])
+    for b in range(masses.shape[0]):
+        k = b * nc
+        for a in range(3 if nc != PLANAR_NC else 2):
+            force[k + a] = masses[b] * gravity[a]
+        if nc == PLANAR_NC:
+            continue
+        g = g_bar(q[k + 3:k + 7])
         omega = g @ v[k + 3:k + 7]
         force[k + 3:k + 7] = -(g.T @ np.cross(omega, inertias[b] @ omega))
-    return mass, force
+    return force
 
 
 @njit(cache=True)
@@ -125,11 +148,18 @@ def _applied_forces(out, q, v, nc, kind, bi, bj, va, vb, vc, scalars):
 
 
 @njit(cache=True)
+def forces_kernel(q, v, nc, masses, inertias, gravity, kind, bi, bj, va, vb, vc, scalars):
+    """Q_e + Q_v (n,), all loads included."""
+    force = _inertial_forces(q, v, nc, masses, gravity, inertias)
+    _applied_forces(force, q, v, nc, kind, bi, bj, va, vb, vc, scalars)
+    return force
+
+
+@njit(cache=True)
 def mass_and_forces_kernel(q, v, nc, masses, inertias, gravity, kind, bi, bj, va, vb, vc, scalars):
     """M(q) (n, n) and Q_e + Q_v (n,), all loads included."""
-    mass, force = _mass_and_inertial_forces(q, v, nc, masses, inertias, gravity)
-    _applied_forces(force, q, v, nc, kind, bi, bj, va, vb, vc, scalars)
-    return mass, force
+    return (_mass_matrix(q, nc, masses, inertias),
+            forces_kernel(q, v, nc, masses, inertias, gravity, kind, bi, bj, va, vb, vc, scalars))
 
 
 class Dynamics:
@@ -294,22 +324,39 @@ def _is_positive_diagonal(matrix):
 
 
 @njit(cache=True)
-def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_args):
+def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_args,
+                        sparsity_arrays):
     """q̈ of the augmented index-1 form with Baumgarte terms, in one compiled call.
 
     Solves [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ − 2αΦ̇ − β²Φ] on the constraint ``rows`` (002 eq. 77
     and 110; α = β = 0 is the unstabilised form) by :func:`range_space_acceleration`.
     ``constraint_args`` are :attr:`ConstraintSystem.kernel_args`, ``dynamics_args``
-    :attr:`Dynamics.kernel_args`.
+    :attr:`Dynamics.kernel_args`, ``sparsity_arrays`` :attr:`ConstraintSystem.sparsity`'s arrays:
+    with every row kept, planar bodies and :data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows
+    or more, the range-space matrix is solved banded (:func:`~adapters.inhouse.banded.
+    banded_spd_solve`), else by :func:`range_space_acceleration`.
     """
-    mass, force = mass_and_forces_kernel(q, v, *dynamics_args)
     every_row = rows.shape[0] == constraint_args[-1]
     jac = kernels.jacobian(q, t, *constraint_args)
     target = kernels.gamma(q, v, t, *constraint_args)
     if not every_row:
         jac, target = jac[rows], target[rows]
+    row_columns = sparsity_arrays[0]
     if alpha != 0.0 or beta != 0.0:
         residual = kernels.phi(q, t, *constraint_args)
-        target = target - 2.0 * alpha * (jac @ v) - beta * beta * (
-            residual if every_row else residual[rows])
-    return range_space_acceleration(mass, jac, force, target, ACCELERATION_CUT)
+        if every_row:
+            target = target - 2.0 * alpha * pattern_matvec(jac, row_columns, v) \
+                - beta * beta * residual
+        else:
+            target = target - 2.0 * alpha * (jac @ v) - beta * beta * residual[rows]
+    force = forces_kernel(q, v, *dynamics_args)
+    nc, masses, inertias = dynamics_args[0], dynamics_args[1], dynamics_args[2]
+    if every_row and jac.shape[0] >= BANDED_MIN_ROWS and nc == PLANAR_NC:
+        inverse = 1.0 / planar_mass_diagonal(masses, inertias)
+        accepted, mu = banded_spd_solve(
+            jac, inverse, target - pattern_matvec(jac, row_columns, inverse * force),
+            ACCELERATION_CUT, sparsity_arrays)
+        if accepted:
+            return inverse * (force + pattern_rmatvec(jac, row_columns, mu))
+    return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
+                                    ACCELERATION_CUT)

@@ -30,7 +30,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
-from adapters.inhouse.linalg import min_norm_solve
+from adapters.inhouse.banded import min_norm_correction, pattern_matvec
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
 from harness.model import Mechanism
@@ -114,7 +114,7 @@ class Formulation(SecondOrderSystem):
         self.counters["factorizations"] += 1
         return index1_acceleration(np.ascontiguousarray(q), np.ascontiguousarray(v), float(t),
                                    *self.gains, self.rows, self.constraints.kernel_args,
-                                   self.dynamics.kernel_args)
+                                   self.dynamics.kernel_args, self.constraints.sparsity.arrays)
 
     def start(self, q, v):
         """Called once with the initial state before the first step (no-op here)."""
@@ -242,7 +242,8 @@ class _Projection(Formulation):
     def _min_norm(self, jac, residual):
         """Φ_q⁺ r (eq. 126), truncated (see the class docstring)."""
         self.counters["factorizations"] += 1
-        return min_norm_solve(np.ascontiguousarray(jac), np.ascontiguousarray(residual), self.cut)
+        return min_norm_correction(np.ascontiguousarray(jac), np.ascontiguousarray(residual),
+                                   self.cut, self.constraints.sparsity.arrays)
 
     def warm_up(self, q, v):
         super().warm_up(q, v)
@@ -265,7 +266,7 @@ class DirectCorrection(_Projection):
     def project(self, t, q, v):
         q = self.project_position(t, q)
         jac = self.jacobian(t, q)
-        return q, v - self._min_norm(jac, jac @ v)
+        return q, v - self._min_norm(jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v))
 
 
 class GeometricElimination(_Projection):
