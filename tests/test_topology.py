@@ -262,3 +262,31 @@ def test_angular_velocity_map_matches_inhouse_velocities(name):
     mapped = angular_velocities(mech, tree, axes, rates)
     assert np.abs(mapped - states.angular_velocity).max() <= 1e-12
     assert np.abs(states.angular_velocity).max() > 0.5  # a moving mechanism, not a trivial match
+
+
+# --- large graphs: Kruskal's maximum-cost tree instead of the enumeration --------------------
+
+@pytest.mark.parametrize("cost", [exact_closure, planar_closure, point_closure, weld_for_ball])
+@pytest.mark.parametrize("scenario", [*scenario_names(),
+                                      *(f"n_fourbar@{n}" for n in (1, 2, 3, 4, 5, 6))])
+def test_the_greedy_tree_is_the_exhaustive_choice(scenario, cost, monkeypatch):
+    """Where both run, Kruskal's tree (forced with EXHAUSTIVE_LIMIT = 0) cuts the same joints as
+    the enumeration of every spanning tree."""
+    import harness.topology as topology
+
+    mech = load(scenario)
+    if cost is planar_closure and not mech.planar:
+        pytest.skip("planar joint classes only")
+    exhaustive = spanning_tree(mech, cost)
+    monkeypatch.setattr(topology, "EXHAUSTIVE_LIMIT", 0)
+    greedy = spanning_tree(mech, cost)
+    assert greedy.cut_joints == exhaustive.cut_joints
+    np.testing.assert_array_equal(greedy.path_matrix(), exhaustive.path_matrix())
+
+
+def test_a_64_cell_n_fourbar_gets_a_breadth_first_tree_at_once():
+    """C(193, 64) candidate cuts: only the greedy tree is possible.  A breadth-first tree of the
+    N-four-bar: every crank on its ground joint (depth 1), every coupler on a crank (depth 2)."""
+    tree = spanning_tree(load("n_fourbar@64"), planar_closure)
+    depths = np.count_nonzero(tree.path_matrix(), axis=0)  # tree joints on each body's path
+    assert len(tree.cut_joints) == 64 and depths.max() == 2
