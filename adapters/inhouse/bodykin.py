@@ -12,6 +12,10 @@ The Jacobians are the exact derivatives of these polynomial expressions, valid a
 normalisation manifold, so that they can be checked by finite differences anywhere.  On the
 manifold they equal the seed's −A ũ̄ Ḡ form (002 table 1, eq. 28).
 
+Each function has an ``_into`` form that writes into arrays the caller owns (the compiled kernels
+reuse one scratch buffer per call instead of allocating small arrays per primitive, which was
+most of their cost) and an allocating form that wraps it.
+
 All functions are numba-compiled; ``body < 0`` denotes ground (the world frame), whose points and
 vectors are constant.  Vectors are always 3-vectors (planar ones have z = 0).
 """
@@ -26,53 +30,66 @@ SPATIAL_NC = 7
 
 
 @njit(cache=True)
-def rotate(q, nc, body, u):
-    """World vector A_b ū, shape (3,)."""
-    out = np.zeros(3)
+def rotate_into(out, q, nc, body, u):
+    """out[:] = world vector A_b ū, out shape (3,)."""
     if body < 0:
-        out[:] = u
-        return out
+        out[0], out[1], out[2] = u[0], u[1], u[2]
+        return
     k = body * nc
     if nc == PLANAR_NC:
         c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
         out[0] = c * u[0] - s * u[1]
         out[1] = s * u[0] + c * u[1]
         out[2] = u[2]
-        return out
+        return
     t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
     a = 2.0 * t0 * t0 - 1.0
     out[0] = a * u[0] + 2.0 * t1 * dot + 2.0 * t0 * (t2 * u[2] - t3 * u[1])
     out[1] = a * u[1] + 2.0 * t2 * dot + 2.0 * t0 * (t3 * u[0] - t1 * u[2])
     out[2] = a * u[2] + 2.0 * t3 * dot + 2.0 * t0 * (t1 * u[1] - t2 * u[0])
+
+
+@njit(cache=True)
+def rotate(q, nc, body, u):
+    """World vector A_b ū, shape (3,)."""
+    out = np.empty(3)
+    rotate_into(out, q, nc, body, u)
     return out
 
 
 @njit(cache=True)
-def point(q, nc, body, u):
-    """World position r_b + A_b ū of a body point, shape (3,)  (002 eq. 1)."""
-    out = rotate(q, nc, body, u)
+def point_into(out, q, nc, body, u):
+    """out[:] = world position r_b + A_b ū of a body point, out shape (3,)  (002 eq. 1)."""
+    rotate_into(out, q, nc, body, u)
     if body >= 0:
         k = body * nc
         out[0] += q[k]
         out[1] += q[k + 1]
         if nc == SPATIAL_NC:
             out[2] += q[k + 2]
+
+
+@njit(cache=True)
+def point(q, nc, body, u):
+    """World position r_b + A_b ū of a body point, shape (3,)  (002 eq. 1)."""
+    out = np.empty(3)
+    point_into(out, q, nc, body, u)
     return out
 
 
 @njit(cache=True)
-def rotate_jacobian(q, nc, body, u):
-    """∂(A_b ū)/∂q_b, shape (3, nc); translation columns are zero."""
-    jac = np.zeros((3, nc))
+def rotate_jacobian_into(jac, q, nc, body, u):
+    """jac[:] = ∂(A_b ū)/∂q_b, jac shape (3, nc); translation columns are zero."""
+    jac[:] = 0.0
     if body < 0:
-        return jac
+        return
     k = body * nc
     if nc == PLANAR_NC:
         c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
         jac[0, 2] = -s * u[0] - c * u[1]
         jac[1, 2] = c * u[0] - s * u[1]
-        return jac
+        return
     t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
     # ∂/∂θ0 = 4θ0 ū + 2 θ̄ × ū
@@ -91,59 +108,110 @@ def rotate_jacobian(q, nc, body, u):
     jac[2, 5] -= 2.0 * t0 * u[0]
     jac[0, 6] -= 2.0 * t0 * u[1]
     jac[1, 6] += 2.0 * t0 * u[0]
+
+
+@njit(cache=True)
+def rotate_jacobian(q, nc, body, u):
+    """∂(A_b ū)/∂q_b, shape (3, nc); translation columns are zero."""
+    jac = np.empty((3, nc))
+    rotate_jacobian_into(jac, q, nc, body, u)
     return jac
 
 
 @njit(cache=True)
-def point_jacobian(q, nc, body, u):
-    """∂(r_b + A_b ū)/∂q_b, shape (3, nc)."""
-    jac = rotate_jacobian(q, nc, body, u)
+def point_jacobian_into(jac, q, nc, body, u):
+    """jac[:] = ∂(r_b + A_b ū)/∂q_b, jac shape (3, nc)."""
+    rotate_jacobian_into(jac, q, nc, body, u)
     if body >= 0:
         jac[0, 0] = 1.0
         jac[1, 1] = 1.0
         if nc == SPATIAL_NC:
             jac[2, 2] = 1.0
+
+
+@njit(cache=True)
+def point_jacobian(q, nc, body, u):
+    """∂(r_b + A_b ū)/∂q_b, shape (3, nc)."""
+    jac = np.empty((3, nc))
+    point_jacobian_into(jac, q, nc, body, u)
     return jac
+
+
+@njit(cache=True)
+def _times_velocity(out, jac, v, nc, body):
+    """out[:] = jac @ q̇_b, out (3,), jac (3, nc)."""
+    k = body * nc
+    for row in range(3):
+        total = 0.0
+        for col in range(nc):
+            total += jac[row, col] * v[k + col]
+        out[row] = total
+
+
+@njit(cache=True)
+def rotate_rate_into(out, scratch, q, v, nc, body, u):
+    """out[:] = d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b; out (3,), scratch (3, nc) is overwritten."""
+    if body < 0:
+        out[:] = 0.0
+        return
+    rotate_jacobian_into(scratch, q, nc, body, u)
+    _times_velocity(out, scratch, v, nc, body)
 
 
 @njit(cache=True)
 def rotate_rate(q, v, nc, body, u):
     """d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b, shape (3,)."""
+    out = np.empty(3)
+    rotate_rate_into(out, np.empty((3, nc)), q, v, nc, body, u)
+    return out
+
+
+@njit(cache=True)
+def point_rate_into(out, scratch, q, v, nc, body, u):
+    """out[:] = velocity of a body point; out (3,), scratch (3, nc) is overwritten."""
     if body < 0:
-        return np.zeros(3)
-    k = body * nc
-    return rotate_jacobian(q, nc, body, u) @ v[k:k + nc]
+        out[:] = 0.0
+        return
+    point_jacobian_into(scratch, q, nc, body, u)
+    _times_velocity(out, scratch, v, nc, body)
 
 
 @njit(cache=True)
 def point_rate(q, v, nc, body, u):
     """Velocity of a body point, shape (3,)."""
-    if body < 0:
-        return np.zeros(3)
-    k = body * nc
-    return point_jacobian(q, nc, body, u) @ v[k:k + nc]
+    out = np.empty(3)
+    point_rate_into(out, np.empty((3, nc)), q, v, nc, body, u)
+    return out
 
 
 @njit(cache=True)
-def rotate_quadratic(q, v, nc, body, u):
-    """The part of d²(A_b ū)/dt² without q̈, shape (3,).
+def rotate_quadratic_into(out, q, v, nc, body, u):
+    """out[:] = the part of d²(A_b ū)/dt² without q̈, out shape (3,).
 
     Planar: −A ū φ̇².  Spatial: A(θ) is quadratic in θ, so the term is 2 A_q(θ̇) ū with
     A_q(θ̇) = 2θ̇0² I + 2 θ̄̇θ̄̇ᵀ + 2 θ̇0 θ̄̇~ (equivalent to 002 eq. 31–33 on the manifold).
     """
-    out = np.zeros(3)
     if body < 0:
-        return out
+        out[:] = 0.0
+        return
     k = body * nc
     if nc == PLANAR_NC:
         w2 = v[k + 2] * v[k + 2]
-        r = rotate(q, nc, body, u)
-        out[0] = -r[0] * w2
-        out[1] = -r[1] * w2
-        return out
+        rotate_into(out, q, nc, body, u)
+        out[0] = -out[0] * w2
+        out[1] = -out[1] * w2
+        out[2] = 0.0
+        return
     d0, d1, d2, d3 = v[k + 3], v[k + 4], v[k + 5], v[k + 6]
     dot = d1 * u[0] + d2 * u[1] + d3 * u[2]
     out[0] = 4.0 * (d0 * d0 * u[0] + d1 * dot + d0 * (d2 * u[2] - d3 * u[1]))
     out[1] = 4.0 * (d0 * d0 * u[1] + d2 * dot + d0 * (d3 * u[0] - d1 * u[2]))
     out[2] = 4.0 * (d0 * d0 * u[2] + d3 * dot + d0 * (d1 * u[1] - d2 * u[0]))
+
+
+@njit(cache=True)
+def rotate_quadratic(q, v, nc, body, u):
+    """The part of d²(A_b ū)/dt² without q̈, shape (3,) (see :func:`rotate_quadratic_into`)."""
+    out = np.empty(3)
+    rotate_quadratic_into(out, q, v, nc, body, u)
     return out

@@ -30,13 +30,14 @@ from numba import njit
 
 from adapters.inhouse.bodykin import (
     PLANAR_NC,
-    point,
-    point_jacobian,
-    point_rate,
+    point_into,
+    point_jacobian_into,
     rotate,
-    rotate_jacobian,
-    rotate_quadratic,
-    rotate_rate,
+    rotate_into,
+    rotate_jacobian_into,
+    rotate_quadratic_into,
+    rotate_rate_into,
+    point_rate_into,
 )
 
 POINT, DOT_VV, DOT_VD, ANGLE, NORM, DRIVE_ROT = range(6)
@@ -46,11 +47,6 @@ POINT, DOT_VV, DOT_VD, ANGLE, NORM, DRIVE_ROT = range(6)
 def _drive(drive, t):
     """θ_d, θ̇_d at time t for ``drive = (value, rate)`` (linear in t, so θ̈_d = 0)."""
     return drive[0] + drive[1] * t, drive[1]
-
-
-@njit(cache=True)
-def _rot_target(k, tab_uj, tab_gj, theta):
-    return np.sin(theta) * tab_uj[k] + np.cos(theta) * tab_gj[k]
 
 
 @njit(cache=True)
@@ -72,28 +68,60 @@ def phi(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3
     theta, _ = _drive(drive, t)
+    a, b, w = np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            d = point(q, nc, i, ui[k]) - point(q, nc, j, uj[k])
-            out[r:r + dim] = d[:dim]
-        elif kd == DOT_VV:
-            out[r] = rotate(q, nc, i, ui[k]) @ rotate(q, nc, j, uj[k])
+            point_into(a, q, nc, i, ui[k])
+            point_into(b, q, nc, j, uj[k])
+            for x in range(dim):
+                out[r + x] = a[x] - b[x]
+        elif kd == DOT_VV or kd == DRIVE_ROT:
+            if kd == DOT_VV:
+                w[:] = uj[k]
+            else:
+                _rot_target_into(w, k, uj, gj, theta)
+            rotate_into(a, q, nc, i, ui[k])
+            rotate_into(b, q, nc, j, w)
+            out[r] = _dot(a, b)
         elif kd == DOT_VD:
-            d = point(q, nc, j, uj[k]) - point(q, nc, i, pi[k])
-            out[r] = rotate(q, nc, i, ui[k]) @ d - const[k] - driver[k] * theta
+            point_into(b, q, nc, j, uj[k])
+            point_into(w, q, nc, i, pi[k])
+            rotate_into(a, q, nc, i, ui[k])
+            out[r] = a[0] * (b[0] - w[0]) + a[1] * (b[1] - w[1]) + a[2] * (b[2] - w[2]) \
+                - const[k] - driver[k] * theta
         elif kd == ANGLE:
             phi_j = q[j * nc + 2] if j >= 0 else 0.0
             phi_i = q[i * nc + 2] if i >= 0 else 0.0
             out[r] = phi_j - phi_i - const[k] - driver[k] * theta
-        elif kd == NORM:
+        else:  # NORM
             s = q[i * nc + 3:i * nc + 7]
             out[r] = s @ s - 1.0
-        else:  # DRIVE_ROT
-            w = _rot_target(k, uj, gj, theta)
-            out[r] = rotate(q, nc, i, ui[k]) @ rotate(q, nc, j, w)
     return out
+
+
+@njit(cache=True)
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+@njit(cache=True)
+def _rot_target_into(out, k, tab_uj, tab_gj, theta):
+    s, c = np.sin(theta), np.cos(theta)
+    for x in range(3):
+        out[x] = s * tab_uj[k, x] + c * tab_gj[k, x]
+
+
+@njit(cache=True)
+def _add_vector_times_jacobian(jac, r, nc, body, vector, block, sign):
+    """jac[r, body block] += sign · vectorᵀ block, block (3, nc)."""
+    if body < 0:
+        return
+    k = body * nc
+    for c in range(nc):
+        jac[r, k + c] += sign * (vector[0] * block[0, c] + vector[1] * block[1, c]
+                                 + vector[2] * block[2, c])
 
 
 @njit(cache=True)
@@ -103,27 +131,40 @@ def jacobian(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
     jac = np.zeros((m, n))
     dim = 2 if nc == PLANAR_NC else 3
     theta, _ = _drive(drive, t)
+    ji, jj = np.empty((3, nc)), np.empty((3, nc))
+    a, b, w, d = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            ji = point_jacobian(q, nc, i, ui[k])
-            jj = point_jacobian(q, nc, j, uj[k])
-            for a in range(dim):
-                _add_block(jac, r + a, q, nc, i, ji[a])
-                _add_block(jac, r + a, q, nc, j, jj[a], -1.0)
+            point_jacobian_into(ji, q, nc, i, ui[k])
+            point_jacobian_into(jj, q, nc, j, uj[k])
+            for x in range(dim):
+                _add_block(jac, r + x, q, nc, i, ji[x])
+                _add_block(jac, r + x, q, nc, j, jj[x], -1.0)
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            wj = uj[k] if kd == DOT_VV else _rot_target(k, uj, gj, theta)
-            a_i = rotate(q, nc, i, ui[k])
-            a_j = rotate(q, nc, j, wj)
-            _add_block(jac, r, q, nc, i, a_j @ rotate_jacobian(q, nc, i, ui[k]))
-            _add_block(jac, r, q, nc, j, a_i @ rotate_jacobian(q, nc, j, wj))
+            if kd == DOT_VV:
+                w[:] = uj[k]
+            else:
+                _rot_target_into(w, k, uj, gj, theta)
+            rotate_into(a, q, nc, i, ui[k])
+            rotate_into(b, q, nc, j, w)
+            rotate_jacobian_into(ji, q, nc, i, ui[k])
+            rotate_jacobian_into(jj, q, nc, j, w)
+            _add_vector_times_jacobian(jac, r, nc, i, b, ji, 1.0)
+            _add_vector_times_jacobian(jac, r, nc, j, a, jj, 1.0)
         elif kd == DOT_VD:
-            a_i = rotate(q, nc, i, ui[k])
-            d = point(q, nc, j, uj[k]) - point(q, nc, i, pi[k])
-            _add_block(jac, r, q, nc, i, d @ rotate_jacobian(q, nc, i, ui[k])
-                       - a_i @ point_jacobian(q, nc, i, pi[k]))
-            _add_block(jac, r, q, nc, j, a_i @ point_jacobian(q, nc, j, uj[k]))
+            rotate_into(a, q, nc, i, ui[k])
+            point_into(b, q, nc, j, uj[k])
+            point_into(w, q, nc, i, pi[k])
+            for x in range(3):
+                d[x] = b[x] - w[x]
+            rotate_jacobian_into(ji, q, nc, i, ui[k])
+            _add_vector_times_jacobian(jac, r, nc, i, d, ji, 1.0)
+            point_jacobian_into(ji, q, nc, i, pi[k])
+            _add_vector_times_jacobian(jac, r, nc, i, a, ji, -1.0)
+            point_jacobian_into(jj, q, nc, j, uj[k])
+            _add_vector_times_jacobian(jac, r, nc, j, a, jj, 1.0)
         elif kd == ANGLE:
             if j >= 0:
                 jac[r, j * nc + 2] += 1.0
@@ -155,31 +196,55 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3
     theta, rate = _drive(drive, t)
+    scratch = np.empty((3, nc))
+    a_i, a_j, da_i, da_j = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
+    qa_i, qa_j, w, w_dot = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            g = rotate_quadratic(q, v, nc, j, uj[k]) - rotate_quadratic(q, v, nc, i, ui[k])
-            out[r:r + dim] = g[:dim]
+            rotate_quadratic_into(qa_j, q, v, nc, j, uj[k])
+            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
+            for x in range(dim):
+                out[r + x] = qa_j[x] - qa_i[x]
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            wj = uj[k] if kd == DOT_VV else _rot_target(k, uj, gj, theta)
-            a_i, a_j = rotate(q, nc, i, ui[k]), rotate(q, nc, j, wj)
-            da_i, da_j = rotate_rate(q, v, nc, i, ui[k]), rotate_rate(q, v, nc, j, wj)
-            acc = (rotate_quadratic(q, v, nc, i, ui[k]) @ a_j + 2.0 * da_i @ da_j
-                   + a_i @ rotate_quadratic(q, v, nc, j, wj))
+            if kd == DOT_VV:
+                w[:] = uj[k]
+            else:
+                _rot_target_into(w, k, uj, gj, theta)
+            rotate_into(a_i, q, nc, i, ui[k])
+            rotate_into(a_j, q, nc, j, w)
+            rotate_rate_into(da_i, scratch, q, v, nc, i, ui[k])
+            rotate_rate_into(da_j, scratch, q, v, nc, j, w)
+            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
+            rotate_quadratic_into(qa_j, q, v, nc, j, w)
+            acc = _dot(qa_i, a_j) + 2.0 * _dot(da_i, da_j) + _dot(a_i, qa_j)
             if kd == DRIVE_ROT:
                 # Φ_t = a_iᵀ A_j ẇ:  2 Φ_qt q̇ = 2 (ȧ_iᵀ A_j ẇ + a_iᵀ Ȧ_j ẇ);  Φ_tt = −θ̇_d² Φ.
-                w_dot = _rot_target_rate(k, uj, gj, theta, rate)
-                acc += 2.0 * (da_i @ rotate(q, nc, j, w_dot) + a_i @ rotate_rate(q, v, nc, j, w_dot))
-                acc -= rate * rate * (a_i @ a_j)
+                c, s = np.cos(theta), np.sin(theta)
+                for x in range(3):
+                    w_dot[x] = rate * (c * uj[k, x] - s * gj[k, x])
+                rotate_into(qa_j, q, nc, j, w_dot)
+                rotate_rate_into(da_j, scratch, q, v, nc, j, w_dot)
+                acc += 2.0 * (_dot(da_i, qa_j) + _dot(a_i, da_j))
+                acc -= rate * rate * _dot(a_i, a_j)
             out[r] = -acc
         elif kd == DOT_VD:
-            a_i = rotate(q, nc, i, ui[k])
-            d = point(q, nc, j, uj[k]) - point(q, nc, i, pi[k])
-            dd = point_rate(q, v, nc, j, uj[k]) - point_rate(q, v, nc, i, pi[k])
-            ddd = rotate_quadratic(q, v, nc, j, uj[k]) - rotate_quadratic(q, v, nc, i, pi[k])
-            out[r] = -(rotate_quadratic(q, v, nc, i, ui[k]) @ d
-                       + 2.0 * rotate_rate(q, v, nc, i, ui[k]) @ dd + a_i @ ddd)
+            rotate_into(a_i, q, nc, i, ui[k])
+            point_into(a_j, q, nc, j, uj[k])
+            point_into(w, q, nc, i, pi[k])
+            point_rate_into(da_j, scratch, q, v, nc, j, uj[k])
+            point_rate_into(w_dot, scratch, q, v, nc, i, pi[k])
+            rotate_quadratic_into(qa_j, q, v, nc, j, uj[k])
+            rotate_quadratic_into(qa_i, q, v, nc, i, pi[k])
+            total = 0.0
+            for x in range(3):
+                total += a_i[x] * (qa_j[x] - qa_i[x])
+            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
+            rotate_rate_into(da_i, scratch, q, v, nc, i, ui[k])
+            for x in range(3):
+                total += qa_i[x] * (a_j[x] - w[x]) + 2.0 * da_i[x] * (da_j[x] - w_dot[x])
+            out[r] = -total
         elif kd == NORM:
             s = v[i * nc + 3:i * nc + 7]
             out[r] = -2.0 * (s @ s)
