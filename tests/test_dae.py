@@ -91,8 +91,10 @@ def test_ggl_reaches_the_end_with_every_sample(case, ggl_default):
 
 def test_ggl_crank_agrees_with_index1_reference(case, ggl_default):
     # Measured at rtol 1e-10, atol 1e-12 over 4 s: 4.8e-8 and 1.4e-7 planar (before/after the
-    # force-kernel rewrite), 1.1e-8 spatial (m, rad, 1).
-    bound = {"fourbar": 1e-6, "fourbar_spatial": 1e-7}[case.mech.name]
+    # force-kernel rewrite), 1.1e-8 and 1.7e-7 spatial (before/after the scratch-buffer kernels
+    # of 2026-11-24, which agree with the old ones to 3e-14): IDA's step choices turn round-off
+    # into differences of this size, so both bounds sit above the larger measurement.
+    bound = {"fourbar": 1e-6, "fourbar_spatial": 1e-6}[case.mech.name]
     assert case.crank_error(ggl_default) < bound
 
 
