@@ -28,7 +28,7 @@ import numpy as np
 import scipy.linalg
 
 from adapters.inhouse.constraints import ConstraintSystem
-from adapters.inhouse.dynamics import Dynamics, index1_acceleration
+from adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
 from adapters.inhouse.banded import min_norm_correction, pattern_matvec
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
@@ -116,12 +116,37 @@ class Formulation(SecondOrderSystem):
                                    *self.gains, self.rows, self.constraints.kernel_args,
                                    self.dynamics.kernel_args, self.constraints.sparsity.arrays)
 
+    @property
+    def acceleration_jacobian(self):
+        """:meth:`_compiled_jacobian` for the index-1 acceleration of this class; None when a
+        subclass computes the acceleration another way (the integrators then difference it)."""
+        if type(self).acceleration is not Formulation.acceleration:
+            return None
+        return self._compiled_jacobian
+
+    def _compiled_jacobian(self, t, q, v, a0):
+        """[∂q̈/∂q, ∂q̈/∂q̇] at (t, q, q̇), shape (n, 2n), by forward differences of the fused
+        right-hand side in one compiled call (:func:`~adapters.inhouse.dynamics.
+        acceleration_jacobian`); ``a0`` = :meth:`acceleration` there.  The implicit integrators
+        use it instead of differencing from Python (2n evaluations either way)."""
+        self.counters["jacobian_evals"] += 2 * self.n
+        self.counters["factorizations"] += 2 * self.n
+        return acceleration_jacobian(np.ascontiguousarray(q), np.ascontiguousarray(v), float(t),
+                                     *self.gains, self.rows, self.constraints.kernel_args,
+                                     self.dynamics.kernel_args, self.constraints.sparsity.arrays,
+                                     np.ascontiguousarray(a0))
+
     def start(self, q, v):
         """Called once with the initial state before the first step (no-op here)."""
 
     def warm_up(self, q, v):
-        """Evaluate every compiled kernel once, so that compilation stays out of timed stepping."""
-        self.acceleration(0.0, *self.reduce(q, v))
+        """Evaluate every compiled kernel once, so that compilation stays out of timed stepping
+        (the Jacobian kernel directly: its evaluations are not the method's)."""
+        q, v = self.reduce(q, v)
+        a0 = self.acceleration(0.0, q, v)
+        if self.acceleration_jacobian is not None:
+            acceleration_jacobian(q, v, 0.0, *self.gains, self.rows, self.constraints.kernel_args,
+                                  self.dynamics.kernel_args, self.constraints.sparsity.arrays, a0)
 
     # -- the integrated state (identity here; reduced by coordinate partitioning) -----------
     def reduce(self, q, v):

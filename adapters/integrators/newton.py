@@ -51,6 +51,22 @@ def first_order_jacobian(acceleration, t, y, a0):
     return jacobian
 
 
+def problem_jacobian(owner, t, y, a0):
+    """J of f(t, y) = (v, a(t, q, v)), shape (2n, 2n): from the problem's own
+    ``acceleration_jacobian(t, q, v, a0) -> (n, 2n)`` when it has one (e.g. differences taken in
+    compiled code), else :func:`first_order_jacobian`; either way the 2n evaluations count in
+    ``owner.nfev``."""
+    own = getattr(owner.problem, "acceleration_jacobian", None)
+    if own is None:
+        return first_order_jacobian(owner._acceleration, t, y, a0)
+    n = a0.size
+    jacobian = np.zeros((2 * n, 2 * n))
+    jacobian[:n, n:] = np.eye(n)
+    jacobian[n:] = own(t, y[:n], y[n:], a0)
+    owner.nfev += 2 * n
+    return jacobian
+
+
 def scaled_norm(dy, y):
     """max_i |dy_i| / (1 + |y_i|): the mixed absolute/relative size of a Newton correction."""
     return float(np.max(np.abs(dy) / (1.0 + np.abs(y))))
@@ -142,7 +158,7 @@ class NewtonSolver:
         return y, False
 
     def _refresh_jacobian(self, t, y, a):
-        self.jacobian = first_order_jacobian(self.owner._acceleration, t, y, a)
+        self.jacobian = problem_jacobian(self.owner, t, y, a)
         self.owner.njev += 1
         self.lu = None
 

@@ -18,7 +18,8 @@ the fixed-step methods) when the problem projects.
 Counters
 --------
 ``nfev`` counts acceleration evaluations through this package's counter, which includes the
-finite-difference Jacobian columns (SciPy's own ``nfev`` leaves those out for Radau and BDF);
+finite-difference Jacobian columns (SciPy's own ``nfev`` leaves those out for Radau and BDF; a
+problem with its own ``acceleration_jacobian`` differences in compiled code and counts them too);
 ``njev`` and ``nlu`` are SciPy's.
 """
 
@@ -28,6 +29,10 @@ import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK45, Radau
 
 from adapters.integrators.base import Integrator, StepFailure
+from adapters.integrators.newton import problem_jacobian
+
+#: SciPy solvers that take a Jacobian (``jac``).
+IMPLICIT_SOLVERS = (Radau, BDF, LSODA)
 
 
 class ScipyIntegrator(Integrator):
@@ -62,10 +67,20 @@ class ScipyIntegrator(Integrator):
         self._solver = self._start(self.dt)
 
     def _start(self, first_step):
-        """A fresh SciPy solver at the current state, shape (2n,) state."""
+        """A fresh SciPy solver at the current state, shape (2n,) state; the implicit solvers
+        get the problem's own Jacobian when it has one (:func:`~.newton.problem_jacobian`)."""
+        own_jacobian = {}
+        if self.solver_class in IMPLICIT_SOLVERS and \
+                getattr(self.problem, "acceleration_jacobian", None) is not None:
+            own_jacobian["jac"] = self._jacobian
         return self.solver_class(self._f, self.t, np.concatenate([self.q, self.v]), np.inf,
                                  first_step=first_step, rtol=self.params["rtol"],
-                                 atol=self.params["atol"], max_step=self.params["max_step"])
+                                 atol=self.params["atol"], max_step=self.params["max_step"],
+                                 **own_jacobian)
+
+    def _jacobian(self, t, y):
+        """∂f/∂y, shape (2n, 2n), at one more acceleration evaluation for a(t, q, v)."""
+        return problem_jacobian(self, t, y, self._acceleration(t, y[:self.n], y[self.n:]))
 
     def _f(self, t, y):
         """f(t, y) = (v, a(t, q, v)), shape (2n,)."""
