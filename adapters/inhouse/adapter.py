@@ -5,8 +5,8 @@ Method names are ``INTEGRATOR+STABILISATION[:key=value,...]`` (e.g. ``rk4+baumga
 the aliases ``default`` and ``best``.  Parameters go to whichever part declares them; the
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
 Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
-one-step methods with ``none``, ``baumgarte`` or ``direct`` run compiled from sample to sample
-(``loop=compiled``, the default; ``loop=python`` steps the same arithmetic from Python).
+one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition`` run compiled from sample
+to sample (``loop=compiled``, the default; ``loop=python`` steps the same arithmetic from Python).
 """
 
 from __future__ import annotations

@@ -1,5 +1,6 @@
 """The compiled stepping path: whole runs of a fixed-step explicit Nyström method with the
-``none``, ``baumgarte`` or ``direct`` formulation in one numba loop, no Python per step.
+``none``, ``baumgarte``, ``direct`` or ``partition`` formulation in one numba loop, no Python per
+step.
 
 The same arithmetic as the Python path (:func:`adapters.integrators.nystrom.nystrom_step` on
 :class:`~adapters.inhouse.stabilisation.Formulation`), so the two agree to round-off: the stages
@@ -10,9 +11,15 @@ the position projection (eq. 127, iterated to ``proj_tol``) and the velocity pro
 (eq. 137) with the truncated pseudo-inverse, then the divergence check of
 :meth:`adapters.integrators.base.Integrator.step`.
 
+Coordinate partitioning (:class:`~adapters.inhouse.partition.CoordinatePartitioning`, 002
+eq. 78–89) integrates the independent coordinates; every stage first recovers the dependent ones
+by Newton–Raphson (:func:`expand`), and before every step but the first the split is checked as
+the Python path checks it.  A step that needs a new split returns :data:`REPARTITION` to the
+caller, which chooses it (rare: a few times per run) and calls again.
+
 A run stops at the first step that fails: the state stays at the last good step and the status
 code says why (:data:`RUNNING`, :data:`DIVERGED_NONFINITE`, :data:`DIVERGED_LIMIT`,
-:data:`FAILED_LINALG`).
+:data:`FAILED_LINALG`, :data:`FAILED_NEWTON`, :data:`FAILED_RANK`).
 """
 
 from __future__ import annotations
@@ -21,24 +28,32 @@ import numpy as np
 from numba import njit
 
 from adapters.inhouse import kernels
-from adapters.inhouse.dynamics import index1_acceleration
 from adapters.inhouse.banded import min_norm_correction, pattern_matvec
+from adapters.inhouse.dynamics import index1_acceleration
+from adapters.inhouse.rank import full_pivot_elimination
 
-RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG = range(4)
+RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILED_RANK, \
+    REPARTITION = range(7)
 
 #: Stabilisation codes of :func:`run_steps`.
-PLAIN, PROJECTED = 0, 1
+PLAIN, PROJECTED, PARTITIONED = range(3)
 
 #: Index of each cost counter in the ``counters`` array of :func:`run_steps`.
 RHS_EVALS, JACOBIAN_EVALS, FACTORIZATIONS, NEWTON_ITERATIONS = range(4)
 
 
 @njit(cache=True)
-def _rows_max_abs(values):
+def _max_abs(values):
     biggest = 0.0
     for x in values:
         biggest = max(biggest, abs(x))
     return biggest
+
+
+@njit(cache=True)
+def _rows_jacobian(q, t, rows, constraint_args, counters):
+    counters[JACOBIAN_EVALS] += 1
+    return np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
 
 
 @njit(cache=True)
@@ -48,35 +63,80 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project`."""
     for _ in range(proj_max_iter):
         residual = kernels.phi(q, t, *constraint_args)[rows]
-        if _rows_max_abs(residual) < proj_tol:
+        if _max_abs(residual) < proj_tol:
             break
         counters[NEWTON_ITERATIONS] += 1
-        counters[JACOBIAN_EVALS] += 1
         counters[FACTORIZATIONS] += 1
-        jac = np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
+        jac = _rows_jacobian(q, t, rows, constraint_args, counters)
         q = q - min_norm_correction(jac, residual, cut, sparsity_arrays)
-    counters[JACOBIAN_EVALS] += 1
     counters[FACTORIZATIONS] += 1
-    jac = np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
+    jac = _rows_jacobian(q, t, rows, constraint_args, counters)
     v = v - min_norm_correction(jac, pattern_matvec(jac, sparsity_arrays[0], v), cut,
                                 sparsity_arrays)
     return q, v
 
 
 @njit(cache=True)
-def _acceleration(q, v, t, gains, rows, constraint_args, dynamics_args, sparsity_arrays,
-                  counters):
-    counters[RHS_EVALS] += 1
-    counters[JACOBIAN_EVALS] += 1
-    counters[FACTORIZATIONS] += 1
-    return index1_acceleration(q, v, t, gains[0], gains[1], rows, constraint_args, dynamics_args,
-                               sparsity_arrays)
+def expand(q_ind, v_ind, t, rows, constraint_args, partition, counters):
+    """Full (q, q̇) from the independent (q_I, q̇_I) (002 eq. 80–84), as
+    :meth:`~adapters.inhouse.partition.CoordinatePartitioning.expand` does it: Newton from the
+    last solution moved along the sensitivity dq_D/dq_I, then q̇_D from it.
+
+    ``partition`` = (independent (ni,), dependent (nd,), last (n,), sensitivity (nd, ni),
+    has_sensitivity (1,), newton_tol, newton_max_iter, cond_ratio, failure (3,)); ``last``,
+    ``sensitivity`` and ``has_sensitivity`` are updated in place.  A Newton failure writes
+    (1, max |Φ|, t) into ``failure`` and raises.
+    """
+    independent, dependent, last, sensitivity, has_sensitivity, tol, max_iter, _, failure = \
+        partition
+    q = last.copy()
+    if has_sensitivity[0]:
+        q[dependent] += sensitivity @ (q_ind - q[independent])
+    q[independent] = q_ind
+    converged = False
+    residual = np.zeros(0)
+    for _ in range(max_iter):
+        residual = kernels.phi(q, t, *constraint_args)[rows]
+        if _max_abs(residual) < tol:
+            converged = True
+            break
+        counters[NEWTON_ITERATIONS] += 1
+        jac = _rows_jacobian(q, t, rows, constraint_args, counters)
+        q[dependent] -= np.linalg.solve(np.ascontiguousarray(jac[:, dependent]), residual)
+    if not converged:
+        failure[0], failure[1], failure[2] = 1.0, _max_abs(residual), t
+        raise ValueError("dependent coordinates did not converge")
+    jac = _rows_jacobian(q, t, rows, constraint_args, counters)
+    sensitivity[:] = np.linalg.solve(np.ascontiguousarray(jac[:, dependent]),
+                                     -np.ascontiguousarray(jac[:, independent]))
+    has_sensitivity[0] = 1
+    last[:] = q
+    v = np.zeros(q.shape[0])
+    v[independent] = v_ind
+    v[dependent] = sensitivity @ v_ind
+    return q, v
 
 
 @njit(cache=True)
-def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args, dynamics_args,
-                  sparsity_arrays, counters):
+def _acceleration(q, v, t, model, partition, stabilisation, counters):
+    """q̈ of the index-1 form; for partitioning the independent part after :func:`expand`."""
+    gains, rows, constraint_args, dynamics_args, sparsity_arrays = model
+    counters[RHS_EVALS] += 1  # counted when attempted, as the integrators count
+    if stabilisation == PARTITIONED:
+        q, v = expand(q, v, t, rows, constraint_args, partition, counters)
+    counters[JACOBIAN_EVALS] += 1
+    counters[FACTORIZATIONS] += 1
+    a = index1_acceleration(q, v, t, gains[0], gains[1], rows, constraint_args, dynamics_args,
+                            sparsity_arrays)
+    if stabilisation == PARTITIONED:
+        return a[partition[0]]
+    return a
+
+
+@njit(cache=True)
+def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters):
     """One step of :func:`adapters.integrators.nystrom.nystrom_step` (same operation order)."""
+    c, a, abar, b, bbar = tableau
     stages = np.empty((c.shape[0], v.shape[0]))
     for i in range(c.shape[0]):
         dq = (c[i] * h) * v
@@ -86,8 +146,8 @@ def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args,
                 dq = dq + (h * h * abar[i, j]) * stages[j]
             if a[i, j] != 0.0:
                 v_stage = v_stage + (h * a[i, j]) * stages[j]
-        stages[i] = _acceleration(q + dq, v_stage, t + c[i] * h, gains, rows, constraint_args,
-                                  dynamics_args, sparsity_arrays, counters)
+        stages[i] = _acceleration(q + dq, v_stage, t + c[i] * h, model, partition,
+                                  stabilisation, counters)
     dq = h * v
     v_new = v
     for j in range(c.shape[0]):
@@ -99,62 +159,91 @@ def _nystrom_step(q, v, t, h, c, a, abar, b, bbar, gains, rows, constraint_args,
 
 
 @njit(cache=True)
-def run_steps(q, v, t0, dt, first, last, tableau, gains, stabilisation, proj_tol, proj_max_iter,
-              cut, limit, rows, constraint_args, dynamics_args, sparsity_arrays, counters):
+def split_check(q_ind, v_ind, t, rows, constraint_args, partition, counters):
+    """The re-partition check of the Python path (``needs_repartition`` on the expanded state):
+    RUNNING to keep the split, REPARTITION when the dependent block is ``cond_ratio`` times worse
+    conditioned than the split full pivoting picks, FAILED_RANK when Φ_q lost rank."""
+    dependent = partition[1]
+    q, _ = expand(q_ind, v_ind, t, rows, constraint_args, partition, counters)
+    jac = _rows_jacobian(q, 0.0, rows, constraint_args, counters)
+    rank, pivots = full_pivot_elimination(jac.T)
+    if rank < jac.shape[0]:
+        partition[8][1] = rank
+        return FAILED_RANK
+    best = np.sort(pivots)
+    if best.shape[0] == dependent.shape[0] and np.all(best == dependent):
+        return RUNNING
+    current = np.linalg.cond(np.ascontiguousarray(jac[:, dependent]))
+    if current > partition[7] * np.linalg.cond(np.ascontiguousarray(jac[:, best])):
+        return REPARTITION
+    return RUNNING
+
+
+@njit(cache=True)
+def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projection, partition,
+              check_due, limit, counters):
     """Steps ``first + 1 … last`` of a fixed-step run from the state (q, q̇) after step ``first``.
 
     Parameters
     ----------
     q, v : ndarray, shape (n,)
-        State after step ``first`` (t = t0 + first·dt); not modified.
+        Integrated state after step ``first`` (t = t0 + first·dt): every coordinate, or the
+        independent ones when partitioning; not modified.
     t0, dt : float
         Start time and step, s.  Step k ends at t0 + k·dt (no accumulated drift).
     first, last : int
     tableau : tuple (c (s,), A (s, s), Ā (s, s), b (s,), b̄ (s,))
         :class:`~adapters.integrators.nystrom.NystromTableau` arrays.
-    gains : ndarray, shape (2,)
-        Baumgarte (α, β), 1/s; zeros for the plain form.
+    model : tuple
+        (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
+        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
+        :attr:`ConstraintSystem.sparsity`'s arrays).
     stabilisation : int
-        :data:`PLAIN` or :data:`PROJECTED` (``direct``).
-    proj_tol, proj_max_iter, cut : float, int, float
+        :data:`PLAIN`, :data:`PROJECTED` (``direct``) or :data:`PARTITIONED`.
+    projection : tuple (proj_tol, proj_max_iter, cut)
         Projection tolerance, iteration limit and truncation of the pseudo-inverse.
+    partition : tuple
+        The state of :func:`expand` (empty arrays unless partitioning).
+    check_due : ndarray of int64, shape (1,)
+        Whether the split is checked before the next step; updated in place.
     limit : float
         Divergence limit on the 2-norms of q and q̇.
-    rows : ndarray of int, shape (r,)
-        Constraint rows in the solves.
-    constraint_args, dynamics_args, sparsity_arrays : tuple
-        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
-        :attr:`ConstraintSystem.sparsity`'s arrays.
     counters : ndarray of int64, shape (4,)
         Incremented in place (:data:`RHS_EVALS` …).
 
     Returns
     -------
-    q, v : ndarray, shape (n,)
+    q, v : ndarray
         The last good state.
     done : int
         Index of the last good step.
     status : int
-        :data:`RUNNING` when step ``last`` was reached, else the code of the failure in step
-        ``done + 1``.
+        :data:`RUNNING` when step ``last`` was reached, :data:`REPARTITION` when the split must
+        be chosen again before step ``done + 1``, else the code of the failure in that step.
     """
-    c, a, abar, b, bbar = tableau
+    proj_tol, proj_max_iter, cut = projection
+    rows, constraint_args = model[1], model[2]
     for k in range(first, last):
         t = t0 + k * dt
         t_new = t0 + (k + 1) * dt
         try:
-            q_new, v_new = _nystrom_step(q, v, t, t_new - t, c, a, abar, b, bbar, gains, rows,
-                                         constraint_args, dynamics_args, sparsity_arrays,
-                                         counters)
+            if stabilisation == PARTITIONED and check_due[0]:
+                verdict = split_check(q, v, t, rows, constraint_args, partition, counters)
+                if verdict != RUNNING:
+                    return q, v, k, verdict
+                check_due[0] = 0
+            q_new, v_new = _nystrom_step(q, v, t, t_new - t, tableau, model, partition,
+                                         stabilisation, counters)
             if stabilisation == PROJECTED:
                 q_new, v_new = _project(q_new, v_new, t_new, rows, proj_tol, proj_max_iter, cut,
-                                        constraint_args, sparsity_arrays, counters)
-        except Exception:  # noqa: BLE001 — LAPACK failures end the run as "failed"
-            return q, v, k, FAILED_LINALG
+                                        constraint_args, model[4], counters)
+        except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
+            return q, v, k, FAILED_NEWTON if partition[8][0] != 0.0 else FAILED_LINALG
         squared_q, squared_v = q_new @ q_new, v_new @ v_new
         if not np.isfinite(squared_q + squared_v):
             return q, v, k, DIVERGED_NONFINITE
         if max(squared_q, squared_v) > limit * limit:
             return q, v, k, DIVERGED_LIMIT
         q, v = q_new, v_new
+        check_due[0] = 1
     return q, v, last, RUNNING

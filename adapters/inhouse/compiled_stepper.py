@@ -2,10 +2,11 @@
 time to the next in a single compiled call, so no Python runs per step.
 
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4) with
-the ``none``, ``baumgarte`` and ``direct`` formulations unless the method says ``loop=python``;
-every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.  The formulation
-object is built as on the Python path (its rows, gains, projection cut and notes are the
-compiled loop's inputs), so both paths integrate the same equations with the same arithmetic.
+the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method says
+``loop=python``; every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
+The formulation object is built as on the Python path (its rows, gains, projection cut, split and
+notes are the compiled loop's inputs), so both paths integrate the same equations with the same
+arithmetic.  Partitioning returns to Python only to choose a new split.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from adapters.base import RunFailure, RunGrid, Stepper
 from adapters.inhouse import compiled
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.kinematics import common_start
+from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
 from adapters.inhouse.states import body_states
 from adapters.integrators import integrator_class
@@ -25,14 +27,11 @@ from harness.trajectory import BodyStates
 
 #: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_steps`.
 COMPILED_FORMULATIONS = {NoStabilisation.name: compiled.PLAIN, Baumgarte.name: compiled.PLAIN,
-                         DirectCorrection.name: compiled.PROJECTED}
+                         DirectCorrection.name: compiled.PROJECTED,
+                         CoordinatePartitioning.name: compiled.PARTITIONED}
 
 #: The ``loop`` method parameter: which stepping path runs a method that has both.
 LOOPS = ("compiled", "python")
-
-_FAILURES = {compiled.DIVERGED_NONFINITE: ("diverged", "non-finite state"),
-             compiled.FAILED_LINALG: ("failed", "LinAlgError: a factorisation failed in the "
-                                                "compiled step")}
 
 
 def has_compiled_path(integrator_name: str, formulation_name: str) -> bool:
@@ -62,40 +61,97 @@ class CompiledStepper(Stepper):
         self.grid = grid
         self.layout = layout_of(mech)
         assembly = common_start(mech)
-        self.q, self.v = assembly.q.copy(), assembly.v.copy()
+        self._start_state = (assembly.q, assembly.v)
         formulation = formulation_class(mech, assembly.q, grid.dt, **formulation_params)
         self.formulation = formulation
         self.notes = list(formulation.notes)
+        self._code = COMPILED_FORMULATIONS[formulation_class.name]
         tableau = integrator_class(integrator_name).tableau
-        projected = COMPILED_FORMULATIONS[formulation_class.name] == compiled.PROJECTED
+        self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
+        self._model = (np.asarray(formulation.gains, dtype=float),
+                       np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
+                       formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays)
+        params = formulation.params
+        self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
+                             float(formulation.cut)) if self._code == compiled.PROJECTED
+                            else (0.0, 0, 0.0))
         self._limit = float(integrator_params["divergence_limit"])
         self._counters = np.zeros(4, dtype=np.int64)
-        self._arguments = (
-            (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar),
-            np.asarray(formulation.gains, dtype=float),
-            COMPILED_FORMULATIONS[formulation_class.name],
-            float(formulation.params["proj_tol"]) if projected else 0.0,
-            int(formulation.params["proj_max_iter"]) if projected else 0,
-            float(formulation.cut) if projected else 0.0,
-            self._limit, np.ascontiguousarray(formulation.rows),
-            formulation.constraints.kernel_args, formulation.dynamics.kernel_args,
-            formulation.constraints.sparsity.arrays)
+        self._check_due = np.zeros(1, dtype=np.int64)
+        self._partition = None
+        self._restart(assembly.q, assembly.v)
         self._run(0)  # compile (or load from numba's cache) outside the timed stepping
 
+    # -- the integrated state ----------------------------------------------------------------
+    def _restart(self, q_full: np.ndarray, v_full: np.ndarray) -> None:
+        """Integrated state from a full one; a (new) split's state for partitioning."""
+        formulation = self.formulation
+        if self._code != compiled.PARTITIONED:
+            self.q, self.v = q_full.copy(), v_full.copy()
+            if self._partition is None:
+                self._partition = _no_partition()
+            return
+        independent = np.ascontiguousarray(formulation.independent)
+        dependent = np.ascontiguousarray(formulation.dependent)
+        params = formulation.params
+        self._partition = (independent, dependent, np.array(q_full, dtype=float),
+                           np.zeros((dependent.size, independent.size)),
+                           np.zeros(1, dtype=np.int64), float(params["newton_tol"]),
+                           int(params["newton_max_iter"]), float(params["cond_ratio"]),
+                           np.zeros(3))
+        self.q, self.v = q_full[independent].copy(), v_full[independent].copy()
+
+    def _full(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Full (q, q̇) of the integrated state at its time ``t``."""
+        if self._code != compiled.PARTITIONED:
+            return self.q, self.v
+        return compiled.expand(self.q, self.v, t, self._model[1], self._model[2],
+                               self._partition, self._counters)
+
+    # -- stepping ------------------------------------------------------------------------------
     def _run(self, last: int):
         return compiled.run_steps(self.q, self.v, 0.0, self.grid.dt, self.steps, last,
-                                  *self._arguments, self._counters)
+                                  self._tableau, self._model, self._code, self._projection,
+                                  self._partition, self._check_due, self._limit, self._counters)
 
     def _step_to(self, t: float) -> None:
-        self.q, self.v, self.steps, status = self._run(self.grid.steps(t))
-        self.t_good = self.steps * self.grid.dt
-        if status == compiled.DIVERGED_LIMIT:
-            raise RunFailure("diverged", f"state norm exceeds divergence_limit={self._limit:g}")
+        target = self.grid.steps(t)
+        while True:
+            self.q, self.v, self.steps, status = self._run(target)
+            self.t_good = self.steps * self.grid.dt
+            if status != compiled.REPARTITION:
+                break
+            self._repartition()
         if status != compiled.RUNNING:
-            raise RunFailure(*_FAILURES[status])
+            raise RunFailure(*self._failure(status))
 
+    def _repartition(self) -> None:
+        """Choose the split again at the current state (the Python path's choice) and restart."""
+        q_full, v_full = self._full(self.t_good)
+        self.formulation.choose_partition(q_full)
+        self._restart(q_full, v_full)
+        self._check_due[0] = 0
+
+    def _failure(self, status: int) -> tuple[str, str]:
+        """(status, reason) of a failure code, worded as the Python path words it."""
+        failure = self._partition[8]
+        if status == compiled.DIVERGED_LIMIT:
+            return "diverged", f"state norm exceeds divergence_limit={self._limit:g}"
+        if status == compiled.DIVERGED_NONFINITE:
+            return "diverged", "non-finite state"
+        if status == compiled.FAILED_NEWTON:
+            return "failed", (f"StepFailure: dependent coordinates did not converge (max |Φ| = "
+                              f"{failure[1]:.3g}) at t = {failure[2]:g}")
+        if status == compiled.FAILED_RANK:
+            return "failed", (f"StepFailure: constraint Jacobian lost rank ({int(failure[1])} < "
+                              f"{self._model[1].size}): singular configuration")
+        return "failed", "LinAlgError: a factorisation failed in the compiled step"
+
+    # -- reading -------------------------------------------------------------------------------
     def _states(self, t: float) -> BodyStates:
-        return body_states(self.layout, self.q, self.v)
+        if self.steps == 0:
+            return body_states(self.layout, *self._start_state)
+        return body_states(self.layout, *self._full(self.t_good))
 
     def counters(self) -> dict:
         own = self.formulation.counters
@@ -106,4 +162,12 @@ class CompiledStepper(Stepper):
                 + int(self._counters[compiled.FACTORIZATIONS]),
                 "newton_iterations": own["newton_iterations"]
                 + int(self._counters[compiled.NEWTON_ITERATIONS]),
-                "repartitions": 0}
+                "repartitions": getattr(self.formulation, "repartitions", 0)}
+
+
+def _no_partition() -> tuple:
+    """The (unused) partition state of the other formulations, typed as :func:`compiled.expand`
+    expects it."""
+    empty = np.zeros(0, dtype=np.int64)
+    return (empty, empty, np.zeros(0), np.zeros((0, 0)), np.zeros(1, dtype=np.int64), 0.0, 0, 0.0,
+            np.zeros(3))
