@@ -60,11 +60,15 @@ def _rows_jacobian(q, t, rows, constraint_args, counters):
 def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, sparsity_arrays,
              counters):
     """Direct violation correction (002 eq. 127 and 137) with the truncated pseudo-inverse;
-    the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project`."""
+    the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project` (and its stop
+    when an iteration no longer reduces max |Φ|)."""
+    previous = np.inf
     for _ in range(proj_max_iter):
         residual = kernels.phi(q, t, *constraint_args)[rows]
-        if _max_abs(residual) < proj_tol:
+        size = _max_abs(residual)
+        if size < proj_tol or not size < previous:
             break
+        previous = size
         counters[NEWTON_ITERATIONS] += 1
         counters[FACTORIZATIONS] += 1
         jac = _rows_jacobian(q, t, rows, constraint_args, counters)
