@@ -34,9 +34,52 @@ from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, Spri
 def g_bar(theta):
     """Ḡ = 2Ē of 002 eq. 28, shape (3, 4)."""
     t0, t1, t2, t3 = theta[0], theta[1], theta[2], theta[3]
-    return 2.0 * np.array([[-t1, t0, t3, -t2],
-                           [-t2, -t3, t0, t1],
-                           [-t3, t2, -t1, t0]])
+    g = np.empty((3, 4))
+    g[0, 0], g[0, 1], g[0, 2], g[0, 3] = -2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2
+    g[1, 0], g[1, 1], g[1, 2], g[1, 3] = -2.0 * t2, -2.0 * t3, 2.0 * t0, 2.0 * t1
+    g[2, 0], g[2, 1], g[2, 2], g[2, 3] = -2.0 * t3, 2.0 * t2, -2.0 * t1, 2.0 * t0
+    return g
+
+
+@njit(cache=True)
+def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row, cut):
+    """q̈ of the augmented system (002 eq. 77) for Euler-parameter bodies with a block-diagonal
+    mass matrix, every constraint row included.
+
+    The rotational block Ḡᵀ J̄ Ḡ is singular along θ; the normalisation row 2θᵀθ̈ = γ_θ fixes
+    θᵀθ̈, so adding c θθᵀ to the block and c θ γ_θ/2 to the force leaves q̈ unchanged
+    (c = 4 tr J̄ / 3, the mean of the block's other eigenvalues 4 J̄_i on the manifold).  The
+    block-diagonal M' is solved body by body, S = Φ_q M'⁻¹ Φ_qᵀ by
+    :func:`~adapters.inhouse.linalg.certified_spd_solve`.
+
+    Returns
+    -------
+    accepted : bool
+        False when S has no certificate (the caller solves the M̃ form with the truncated SVD).
+    acceleration : ndarray, shape (n,) or (0,)
+    """
+    n, m = q.shape[0], jac.shape[0]
+    rhs = np.empty((n, m + 1))
+    rhs[:, :m] = jac.T
+    rhs[:, m] = force
+    for k in range(kind.shape[0]):
+        if kind[k] == kernels.NORM:
+            start = bi[k] * nc + 3
+            weight = 4.0 * np.trace(inertias[bi[k]]) / 3.0 * 0.5 * target[row[k]]
+            rhs[start:start + 4, m] += weight * q[start:start + 4]
+    solved = np.empty((n, m + 1))
+    for b in range(masses.shape[0]):
+        k = b * nc
+        solved[k:k + 3] = rhs[k:k + 3] / masses[b]
+        theta = q[k + 3:k + 7]
+        g = g_bar(theta)
+        block = g.T @ inertias[b] @ g + 4.0 * np.trace(inertias[b]) / 3.0 * np.outer(theta, theta)
+        solved[k + 3:k + 7] = np.linalg.solve(block, np.ascontiguousarray(rhs[k + 3:k + 7]))
+    columns, free = np.ascontiguousarray(solved[:, :m]), np.ascontiguousarray(solved[:, m])
+    certified, mu = certified_spd_solve(jac @ columns, target - jac @ free, cut)
+    if not certified:
+        return False, np.empty(0)
+    return True, free + columns @ mu
 
 
 @njit(cache=True)
@@ -358,6 +401,12 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
             ACCELERATION_CUT, sparsity_arrays)
         if accepted:
             return inverse * (force + pattern_rmatvec(jac, row_columns, mu))
+    if every_row and nc != PLANAR_NC:
+        accepted, acceleration = spatial_block_acceleration(
+            q, jac, force, target, nc, masses, inertias, constraint_args[1], constraint_args[2],
+            constraint_args[4], ACCELERATION_CUT)
+        if accepted:
+            return acceleration
     return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
                                     ACCELERATION_CUT)
 
