@@ -30,8 +30,11 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 
 from adapters.inhouse.linalg import CERTIFICATE_MARGIN, min_norm_solve
 
-#: Below this many constraint rows the dense solves are faster (measured on the N-four-bar).
-BANDED_MIN_ROWS = 40
+#: From this many constraint rows on the banded solves are used.  Measured on n_fourbar@N at the
+#: start (µs per acceleration solve, dense / banded; per projection solve likewise): 14 rows
+#: 2.6 / 3.9 (2.0 / 3.8), 20 rows 4.4 / 5.1, 26 rows 6.9 / 6.4 (5.9 / 6.1), 38 rows 16.9 / 10.7,
+#: 50 rows 46.8 / 12.1, 98 rows 4147 / 67 (the dense certificate fails there: SVD).
+BANDED_MIN_ROWS = 30
 
 
 def _lapack(name: str, n_args: int):
