@@ -78,10 +78,7 @@ def phi(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
             for x in range(dim):
                 out[r + x] = a[x] - b[x]
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            if kd == DOT_VV:
-                w[:] = uj[k]
-            else:
-                _rot_target_into(w, k, uj, gj, theta)
+            _second_vector_into(w, k, kd, uj, gj, theta)
             rotate_into(a, q, nc, i, ui[k])
             rotate_into(b, q, nc, j, w)
             out[r] = _dot(a, b)
@@ -107,7 +104,12 @@ def _dot(a, b):
 
 
 @njit(cache=True)
-def _rot_target_into(out, k, tab_uj, tab_gj, theta):
+def _second_vector_into(out, k, kind, tab_uj, tab_gj, theta):
+    """The vector on body j of a DOT_VV row (ū_j) or of a DRIVE_ROT row (sin θ_d f̄_j +
+    cos θ_d ḡ_j), written into ``out`` (3,)."""
+    if kind == DOT_VV:
+        out[:] = tab_uj[k]
+        return
     s, c = np.sin(theta), np.cos(theta)
     for x in range(3):
         out[x] = s * tab_uj[k, x] + c * tab_gj[k, x]
@@ -143,10 +145,7 @@ def jacobian(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
                 _add_block(jac, r + x, q, nc, i, ji[x])
                 _add_block(jac, r + x, q, nc, j, jj[x], -1.0)
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            if kd == DOT_VV:
-                w[:] = uj[k]
-            else:
-                _rot_target_into(w, k, uj, gj, theta)
+            _second_vector_into(w, k, kd, uj, gj, theta)
             rotate_into(a, q, nc, i, ui[k])
             rotate_into(b, q, nc, j, w)
             rotate_jacobian_into(ji, q, nc, i, ui[k])
@@ -208,10 +207,7 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
             for x in range(dim):
                 out[r + x] = qa_j[x] - qa_i[x]
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            if kd == DOT_VV:
-                w[:] = uj[k]
-            else:
-                _rot_target_into(w, k, uj, gj, theta)
+            _second_vector_into(w, k, kd, uj, gj, theta)
             rotate_into(a_i, q, nc, i, ui[k])
             rotate_into(a_j, q, nc, j, w)
             rotate_rate_into(da_i, scratch, q, v, nc, i, ui[k])
