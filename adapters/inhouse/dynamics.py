@@ -42,6 +42,22 @@ def g_bar(theta):
 
 
 @njit(cache=True)
+def _inertia_certified(mass, inertia, cut):
+    """Whether a body's mass is positive and its inertia J̄ (3, 3) positive definite with
+    λ_min > cut · λ_max: positive leading minors (Sylvester) make J̄ positive definite, and
+    λ_min = det J̄ / (λ₂λ₃) ≥ det J̄ / (tr J̄)², so det J̄ > cut (tr J̄)³ gives λ_min > cut tr J̄
+    ≥ cut λ_max.  A few flops per body, so the
+    block solve below can refuse slender bars (a zero moment about their axis) and point masses
+    before a 4×4 factorisation divides by zero."""
+    if not mass > 0.0 or not inertia[0, 0] > 0.0:
+        return False
+    if not inertia[0, 0] * inertia[1, 1] - inertia[0, 1] * inertia[1, 0] > 0.0:
+        return False
+    trace = inertia[0, 0] + inertia[1, 1] + inertia[2, 2]
+    return np.linalg.det(inertia) > cut * trace * trace * trace
+
+
+@njit(cache=True)
 def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row, cut):
     """q̈ of the augmented system (002 eq. 77) for Euler-parameter bodies with a block-diagonal
     mass matrix, every constraint row included.
@@ -55,9 +71,14 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     Returns
     -------
     accepted : bool
-        False when S has no certificate (the caller solves the M̃ form with the truncated SVD).
+        False when a body's mass block has no certificate (:func:`_inertia_certified`: slender
+        bars, point masses) or S has none; the caller then solves the M̃ form with the
+        truncated SVD.
     acceleration : ndarray, shape (n,) or (0,)
     """
+    for b in range(masses.shape[0]):
+        if not _inertia_certified(masses[b], inertias[b], cut):
+            return False, np.empty(0)
     n, m = q.shape[0], jac.shape[0]
     rhs = np.empty((n, m + 1))
     rhs[:, :m] = jac.T
