@@ -139,7 +139,13 @@ def test_the_flattened_nfourbar_start_is_refused_as_singular(nfourbar):
     message = str(error.value)
     assert "nfourbar.toml" in message and "singular configuration at driver O1 = -1.5708" in message
     assert "condition" in message and "initial.guess" in message
-    assert error.value.report.condition > CONDITION_LIMIT  # measured 2.8e16
+    # Newton stops within round-off of the flat position, so which symptom fires depends on the
+    # CPU's round-off: a QR pivot under RANK_TOLERANCE (rank 13 of 14, mobility 2: measured on an
+    # AMD EPYC, where the remaining rows then have condition 9.1e3) or a full rank with
+    # [independent rows; driver row] at condition 2.8e16 (measured on the CI machine).
+    report = error.value.report
+    assert report.singular
+    assert report.mobility == 2 or report.condition > CONDITION_LIMIT
 
 
 def test_the_upright_nfourbar_assembles_with_mobility_one(nfourbar):
