@@ -106,6 +106,11 @@ ORDER_RUN = (0.05, 1e-3, np.linspace(0.0, 0.05, 6))
 #: Exudyn 2.4e-11, PyBullet 3.9e-12, MuJoCo 1.2e-13, in-house 1.1e-14, Pinocchio 5.3e-15.
 #: (Before the spanning tree broke ties by name: MuJoCo 1.25e-5, PyBullet 1.7e-3.)
 ORDER_TOLERANCE = 1e-9
+#: (c) Method of the order runs where not ``best``: PyBullet's ``best`` exits its solver at
+#: Bullet's residual threshold (1e-7), so where it stops depends on round-off, and the two orders'
+#: states differ by up to 2.6e-4 (38 of the 200 slow examples above 1e-9, measured 2026-11-24);
+#: with the exit off (threshold 0) they differ by round-off only, which is what this test checks.
+ORDER_METHOD = {"pybullet": "best:solverResidualThreshold=0"}
 
 
 def _start(mech: Mechanism) -> BodyStates:
@@ -336,7 +341,8 @@ def order_gap(name: str, pair) -> float | None:
         return None
     _describe(mech)
     t_end, dt, times = ORDER_RUN
-    runs = [adapter.simulate(model, "best", dt, t_end, times) for adapter, model in built]
+    runs = [adapter.simulate(model, ORDER_METHOD.get(name, "best"), dt, t_end, times)
+            for adapter, model in built]
     for run in runs:
         assert run.status == "ok", f"{name}: {run.status}: {run.reason}"
     back = [other.body_index(body.name) for body in mech.bodies]

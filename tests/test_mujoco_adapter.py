@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 from adapters.base import UnsupportedCase
 from adapters.mujoco_adapter import MujocoAdapter, export_mjcf
 from adapters.mujoco_adapter.build import floored_inertia
+from adapters.mujoco_adapter.methods import INTEGRATORS
 from harness.initial import initial_state
 from harness.model import BodyTorque, JointActuation, SpringDamper
 from harness.outputs import output_series
@@ -282,6 +283,44 @@ def test_blow_up_is_diverged_with_its_time():
     assert trajectory.failure_time == pytest.approx(1.91)
     assert trajectory.n_samples == 192
     assert np.all(np.isfinite(trajectory.position))
+
+
+@pytest.mark.parametrize("every, samples", [(0.1, 20), (4.0, 1)])
+def test_divergence_inside_a_chunk_is_found_by_replay(every, samples):
+    """The blow-up above (step 192) with 10 and 400 steps per ``mj_step`` call: the warning is
+    seen after the chunk, the run replayed from its start finds the same step and last good
+    state (1.91 s), and every sample before the chunk is kept."""
+    mech = load("slider_crank_planar")
+    times = _times(mech.duration, 1e-2, every)
+    trajectory = ADAPTER.simulate(ADAPTER.build(mech), "default", 1e-2, mech.duration, times)
+    assert trajectory.status == "diverged"
+    assert trajectory.failure_time == pytest.approx(1.91)
+    assert trajectory.steps == 192
+    assert trajectory.n_samples == samples
+
+
+def test_divergence_warnings_are_the_bad_state_ones():
+    from adapters.mujoco_adapter.stepping import DIVERGENCE_WARNINGS
+
+    watched = range(mujoco.mjtWarning.mjNWARNING)[DIVERGENCE_WARNINGS]
+    assert list(watched) == [mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                             mujoco.mjtWarning.mjWARN_BADQACC]
+
+
+@pytest.mark.parametrize("method", ["default", "best"])
+def test_bare_loop_takes_the_steps_in_one_call(monkeypatch, method):
+    calls = []
+
+    def counted(model, data, nstep=1):
+        step(model, data, nstep)
+        calls.append((nstep, data.time, model.opt.integrator))
+
+    step = mujoco.mj_step
+    monkeypatch.setattr(mujoco, "mj_step", counted)
+    seconds = ADAPTER.bare_loop(ADAPTER.build(load("fourbar")), method, 1e-3, 250)
+    assert isinstance(seconds, float) and seconds > 0.0
+    integrator = ADAPTER.method_spec(method)[1]["integrator"]
+    assert calls == [(250, pytest.approx(0.25, rel=1e-12), INTEGRATORS[integrator])]
 
 
 def test_engine_exception_is_failed(monkeypatch, case):

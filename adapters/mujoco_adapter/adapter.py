@@ -5,6 +5,8 @@ and :mod:`.stepping`, the engine-specific stepper driven by the shared run loop
 
 from __future__ import annotations
 
+import time
+
 import mujoco
 import numpy as np
 
@@ -13,7 +15,7 @@ from adapters.mujoco_adapter.build import MujocoModel, build_model
 from adapters.mujoco_adapter.methods import STAGES, _check_params, _configured, _method_specs
 from adapters.mujoco_adapter.state import _body_states
 from adapters.mujoco_adapter.state import _start as _set_start
-from adapters.mujoco_adapter.stepping import _advance
+from adapters.mujoco_adapter.stepping import Stepping
 from harness.initial import initial_state
 from harness.model import Mechanism
 from harness.trajectory import BodyStates
@@ -71,6 +73,17 @@ class MujocoAdapter(Adapter):
                 "notes": f"MuJoCo nq = {model.model.nq} (tree joints), {model.model.neq} "
                          f"equality constraint(s) with {rows} rows closing the loops"}
 
+    def bare_loop(self, model: MujocoModel, method: str, dt: float, n_steps: int) -> float:
+        """MuJoCo's own loop alone: ``n_steps`` steps in one ``mj_step(nstep=n_steps)`` call
+        (a Python loop of ``mj_step`` when pose-dependent loads are refreshed every step) on the
+        model and start :meth:`simulate` uses, without warning checks or state read-back."""
+        spec, params = self.method_spec(method)
+        self._check_params(spec, params)
+        stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
+        began = time.perf_counter()
+        stepper.stepping.run(n_steps)
+        return time.perf_counter() - began
+
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
         _check_params(params)
 
@@ -82,9 +95,10 @@ class MujocoAdapter(Adapter):
 class _MujocoStepper(Stepper):
     """One MuJoCo run: the configured model and its data at the harness's initial state.
 
-    Samples are read after step ``round(t / dt)``; a bad-qpos/qvel/qacc warning ends the run as
-    ``diverged`` with the state before the step that raised it as the last good one (MuJoCo
-    itself would reset and carry on).
+    Samples are read after step ``round(t / dt)``, the steps between two samples taken in one
+    call (:class:`~adapters.mujoco_adapter.stepping.Stepping`); a bad-qpos/qvel/qacc warning ends
+    the run as ``diverged`` with the state before the step that raised it as the last good one
+    (MuJoCo itself would reset and carry on).
     """
 
     def __init__(self, built: MujocoModel, params: dict, grid: RunGrid):
@@ -98,19 +112,30 @@ class _MujocoStepper(Stepper):
         self.notes = _notes(built, self.model)
         self._previous = _set_start(built, self.model, self.data,
                                     initial_state(built.mechanism)).quaternion
+        self.stepping = Stepping(self.model, self.data, built.loads)
+        # Bound once: _step_to runs per sample, on the clock.
+        self._dt, self._run, self._warnings = grid.dt, self.stepping.run, self.stepping.warnings
 
     def _step_to(self, t: float) -> None:
-        count = self.grid.steps(t) - self.steps
+        count = round(t / self._dt) - self.steps  # RunGrid.steps inlined
         if count <= 0:
             return
-        bad = _advance(self.model, self.data, self.built.loads, count)
-        if bad is not None:
-            self.steps += bad
-            self.t_good = (self.steps - 1) * self.grid.dt
-            raise RunFailure("diverged", "MuJoCo raised a bad qpos/qvel/qacc warning (it would "
-                                         "reset and carry on)")
+        self._run(count)
+        if any(self._warnings.tolist()):
+            self._diverged(count)
         self.steps += count
-        self.t_good = self.steps * self.grid.dt
+        self.t_good = self.steps * self._dt
+
+    def _diverged(self, count: int) -> None:
+        """End the run at the step of the last ``count`` that raised a warning."""
+        bad = self.stepping.first_bad_step(self.steps, count)
+        if bad is None:
+            raise RuntimeError("MuJoCo raised a divergence warning that a replay of the run did "
+                               "not reproduce")
+        self.steps += bad
+        self.t_good = (self.steps - 1) * self._dt
+        raise RunFailure("diverged", "MuJoCo raised a bad qpos/qvel/qacc warning (it would "
+                                     "reset and carry on)")
 
     def _states(self, t: float) -> BodyStates:
         states = _body_states(self.built, self.model, self.data, self._previous)

@@ -5,19 +5,25 @@ diverged.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import mujoco
 import numpy as np
 
 from adapters.mujoco_adapter.loads import _Loads, _moving_wrenches
 
-#: Warnings that mean the state went bad (MuJoCo then resets the simulation and carries on).
-DIVERGENCE_WARNINGS = np.array([mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
-                                mujoco.mjtWarning.mjWARN_BADQACC], dtype=int)
+#: Warnings that mean the state went bad (MuJoCo then resets the simulation and carries on):
+#: bad qpos, bad qvel, bad qacc, consecutive in ``mjtWarning``, so one slice of the counters.
+DIVERGENCE_WARNINGS = slice(int(mujoco.mjtWarning.mjWARN_BADQPOS),
+                            int(mujoco.mjtWarning.mjWARN_BADQACC) + 1)
+#: The part of the state a run is replayed from (time, qpos, qvel, warm start, applied forces …).
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
 def _diverged(data: mujoco.MjData) -> bool:
     """True when a divergence warning was raised since :func:`_clear_warnings`."""
-    return bool(data.warning.number[DIVERGENCE_WARNINGS].any())
+    return any(data.warning.number[DIVERGENCE_WARNINGS].tolist())
 
 
 def _clear_warnings(data: mujoco.MjData) -> None:
@@ -37,6 +43,21 @@ def _step_once(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads) -> Non
     mujoco.mj_step(model, data)
 
 
+def _steps_with_loads(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads,
+                      count: int) -> None:
+    """Take ``count`` steps one by one, refreshing the pose-dependent loads before each."""
+    for _ in range(count):
+        _step_once(model, data, loads)
+
+
+def _steps(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads) -> Callable[[int], None]:
+    """A function taking ``count`` steps with no checks: inside MuJoCo (``mj_step(nstep=count)``)
+    unless pose-dependent loads must be refreshed before every step."""
+    if loads.moving:
+        return functools.partial(_steps_with_loads, model, data, loads)
+    return functools.partial(mujoco.mj_step, model, data)
+
+
 def _first_bad_step(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads,
                     count: int) -> int | None:
     """Step ``count`` times one by one; the 1-based step that raised a divergence warning."""
@@ -48,20 +69,48 @@ def _first_bad_step(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads,
     return None
 
 
-def _advance(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads, count: int) -> int | None:
-    """Take ``count`` steps; the 1-based index of the step that diverged, else None.
+class Stepping:
+    """The steps of one run and the divergence check after each chunk of them.
 
-    Without pose-dependent loads the steps run inside MuJoCo (``mj_step(nstep=count)``); if that
-    raised a warning, the chunk is replayed from a saved state step by step to find which step.
+    A chunk runs as :attr:`run` (also the bare loop of
+    :meth:`adapters.mujoco_adapter.adapter.MujocoAdapter.bare_loop`); afterwards the caller reads
+    :attr:`warnings` (zeroed at the start, so any count means a divergence).  Only when one fired
+    is the run replayed (:meth:`first_bad_step`) — from the start state saved here, to the
+    chunk's start in one call, then step by step — to find the step: MuJoCo is deterministic, so
+    the replay retraces the run, and a good run pays for one counter read per chunk.
+
+    Parameters
+    ----------
+    model, data
+        The configured model and its data at the run's start state.
+    loads : _Loads
+
+    Attributes
+    ----------
+    run : callable
+        ``run(count)`` takes ``count`` steps with no checks (:func:`_steps`).
+    warnings : ndarray, shape (3,)
+        The bad qpos/qvel/qacc warning counters, a view into ``data``.
     """
-    if loads.moving:
-        return _first_bad_step(model, data, loads, count)
-    kind = mujoco.mjtState.mjSTATE_INTEGRATION
-    saved = np.empty(mujoco.mj_stateSize(model, kind))
-    mujoco.mj_getState(model, data, saved, kind)
-    _clear_warnings(data)
-    mujoco.mj_step(model, data, count)
-    if not _diverged(data):
-        return None
-    mujoco.mj_setState(model, data, saved, kind)
-    return _first_bad_step(model, data, loads, count)
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads):
+        self.model, self.data, self.loads = model, data, loads
+        self.run = _steps(model, data, loads)
+        self._start = np.empty(mujoco.mj_stateSize(model, _STATE))
+        mujoco.mj_getState(model, data, self._start, _STATE)
+        _clear_warnings(data)
+        self.warnings = data.warning.number[DIVERGENCE_WARNINGS]
+
+    def first_bad_step(self, taken: int, count: int) -> int | None:
+        """The 1-based step of the last chunk that raised a warning, by replaying the run.
+
+        Parameters
+        ----------
+        taken : int
+            Steps before the chunk.
+        count : int
+            Steps in the chunk.
+        """
+        mujoco.mj_setState(self.model, self.data, self._start, _STATE)
+        self.run(taken)
+        return _first_bad_step(self.model, self.data, self.loads, count)

@@ -5,12 +5,13 @@ loop (:meth:`adapters.base.Adapter.simulate`), with Bullet's extra divergence ch
 from __future__ import annotations
 
 import contextlib
+import time
 
 import numpy as np
 
 from adapters.base import Adapter, MethodSpec, RunGrid, Stepper
 from adapters.pybullet_adapter.build import PybulletModel, build_model
-from adapters.pybullet_adapter.loads import _apply_loads, _needs_body_loads, _tree_actuation
+from adapters.pybullet_adapter.loads import _loaded_steps
 from adapters.pybullet_adapter.quiet import pybullet
 from adapters.pybullet_adapter.state import _read_states
 from adapters.pybullet_adapter.world import bullet_world
@@ -40,16 +41,30 @@ _ENGINE_DEFAULTS = {
     "numNonContactInnerIterations": 1,
 }
 #: The most accurate solver settings measured at a given step (see the report): full error
-#: reduction of the loop closure, more iterations, no residual early exit.  The MLCP solvers
-#: (PGS, Dantzig) do worse on these loops: PGS blows up, Dantzig leaves the loop open.
-_BEST = {**_ENGINE_DEFAULTS, "numSolverIterations": 200, "erp": 1.0, "solverResidualThreshold": 0.0}
+#: reduction of the loop closure, more iterations.  The MLCP solvers (PGS, Dantzig) do worse on
+#: these loops: PGS blows up, Dantzig leaves the loop open.  The residual early exit stays at
+#: Bullet's default 1e-7: measured 2026-11-24 over 4 s, max crank-angle error against the reference
+#: with threshold 0 / 1e-7 (rad): fourbar 2.895e-2 / 2.896e-2 at dt = 1e-3, 2.642e-3 / 2.643e-3 at
+#: 1e-4; fourbar_spatial 2.895e-2 / 2.898e-2, 2.642e-3 / 2.644e-3; slider_crank 0.5194 / 0.5194,
+#: 5.435e-2 / 5.436e-2; slider_crank_planar 0.3950 / 0.3949, 6.396e-2 / 6.396e-2 — the same
+#: to 0.1 %, as are the loop-closure drifts (fourbar 2.098e-4 / 2.098e-4 m at 1e-3), at a third
+#: of the time per step (19–26 µs with threshold 0, 6–8 µs with 1e-7).
+_BEST = {**_ENGINE_DEFAULTS, "numSolverIterations": 200, "erp": 1.0}
 #: ``best`` with ten Bullet sub-steps per step (ten times the work per step).
 _SUBSTEPS = {**_BEST, "numSubSteps": 10}
 
 
 class _BulletStepper(Stepper):
     """One Bullet world stepped at the fixed step ``dt``; samples are read after step
-    ``round(t / dt)``, the loads re-applied before every step."""
+    ``round(t / dt)``, the loads re-applied before every step.
+
+    Attributes
+    ----------
+    take_steps : callable
+        ``take_steps(count)`` takes ``count`` steps with their loads and no checks
+        (:func:`~adapters.pybullet_adapter.loads._loaded_steps`); divergence is checked on the
+        samples (:meth:`divergence`).
+    """
 
     def __init__(self, model: PybulletModel, params: dict, grid: RunGrid):
         super().__init__()
@@ -57,18 +72,17 @@ class _BulletStepper(Stepper):
         self.notes = list(model.notes)
         self.substeps = max(1, int(params["numSubSteps"]))
         self.limit = _DIVERGED_SCALE * max(model.size, 1.0)
-        self._loads = (_tree_actuation(model), _needs_body_loads(model))
         with contextlib.ExitStack() as stack:
             world = stack.enter_context(bullet_world(model, params, grid.dt))
             self._exit = stack.pop_all()  # the world stays open until close()
         self.uid, self.client = world.body, world.client
+        self.take_steps = _loaded_steps(model, self.uid, self.client)
 
     def _step_to(self, t: float) -> None:
-        actuation, needs_state = self._loads
-        while self.steps < self.grid.steps(t):
-            _apply_loads(self.model, self.uid, self.client, actuation, needs_state)
-            pybullet.stepSimulation(physicsClientId=self.client)
-            self.steps += 1
+        count = self.grid.steps(t) - self.steps
+        if count > 0:
+            self.take_steps(count)
+            self.steps += count
 
     def _states(self, t: float) -> BodyStates:
         return _read_states(self.model, self.uid, self.client)
@@ -112,8 +126,8 @@ class PybulletAdapter(Adapter):
             MethodSpec("default", "PyBullet's own solver settings at the given step "
                        "(setPhysicsEngineParameter defaults)", dict(_ENGINE_DEFAULTS)),
             MethodSpec("best", "most accurate settings measured: erp = 1 (full error reduction "
-                       "of the loop closure), 200 iterations, no residual early exit",
-                       dict(_BEST)),
+                       "of the loop closure), 200 iterations, Bullet's residual early exit "
+                       "(1e-7; 0 measured no more accurate, 3× slower)", dict(_BEST)),
             MethodSpec("substeps", "best with numSubSteps = 10: Bullet divides every step in ten",
                        dict(_SUBSTEPS)),
         ]
@@ -139,6 +153,19 @@ class PybulletAdapter(Adapter):
                 "notes": f"Bullet multibody with {len(kinds)} joint(s), {coordinates} position "
                          f"coordinates; {len(constraints)} point-to-point constraint(s) with "
                          f"{rows} rows closing the loops"}
+
+    def bare_loop(self, model: PybulletModel, method: str, dt: float, n_steps: int) -> float:
+        """Bullet's loop alone: ``n_steps`` calls of ``stepSimulation``, each after the loads
+        Bullet needs re-applied (it clears them every step), in the world :meth:`simulate`
+        builds, without samples or checks."""
+        spec, params = self.method_spec(method)
+        stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
+        try:
+            began = time.perf_counter()
+            stepper.take_steps(n_steps)
+            return time.perf_counter() - began
+        finally:
+            stepper.close()
 
     def _start(self, model: PybulletModel, spec: MethodSpec, params: dict,
                grid: RunGrid) -> _BulletStepper:

@@ -8,6 +8,9 @@
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import numpy as np
 
 from adapters.pybullet_adapter.build import PybulletModel
@@ -74,13 +77,9 @@ def _add_spring(mech: Mechanism, spring: SpringDamper, poses: dict[int, _Pose],
         wrench[index, 1] += np.cross(arm, force)
 
 
-def _apply_loads(model: PybulletModel, uid: int, client: int, actuation, needs_state: bool) -> None:
-    """Apply this step's joint torques and body wrenches (Bullet clears them every step)."""
-    for link, value in actuation:
-        pybullet.setJointMotorControl2(uid, link, pybullet.TORQUE_CONTROL, force=value,
-                                       physicsClientId=client)
-    if not needs_state:
-        return
+def _apply_body_loads(model: PybulletModel, uid: int, client: int) -> None:
+    """Apply this step's body wrenches, recomputed from the body states (Bullet clears them
+    every step)."""
     states = _read_states(model, uid, client)
     for index, (force, torque) in enumerate(_body_wrenches(model, states)):
         link = model.body_links[index]
@@ -90,6 +89,26 @@ def _apply_loads(model: PybulletModel, uid: int, client: int, actuation, needs_s
         if np.any(torque):
             pybullet.applyExternalTorque(uid, link, list(torque), pybullet.WORLD_FRAME,
                                          physicsClientId=client)
+
+
+def _loaded_steps(model: PybulletModel, uid: int, client: int) -> Callable[[int], None]:
+    """A function taking ``count`` steps of the world, each after applying its loads: the joint
+    torques of tree actuation (``TORQUE_CONTROL``) and, when some load depends on the state, the
+    body wrenches.  No checks: this is both the adapter's stepping and its bare loop."""
+    loads = [functools.partial(pybullet.setJointMotorControl2, uid, link,
+                               pybullet.TORQUE_CONTROL, force=value, physicsClientId=client)
+             for link, value in _tree_actuation(model)]
+    if _needs_body_loads(model):
+        loads.append(functools.partial(_apply_body_loads, model, uid, client))
+    step = functools.partial(pybullet.stepSimulation, physicsClientId=client)
+
+    def steps(count: int) -> None:
+        for _ in range(count):
+            for apply in loads:
+                apply()
+            step()
+
+    return steps
 
 
 def _needs_body_loads(model: PybulletModel) -> bool:

@@ -156,9 +156,10 @@ def _read_states(model: PybulletModel, uid: int, client: int) -> BodyStates:
     quats = np.array([row[1] for row in rows], dtype=float)
     good = np.all(np.isfinite(quats), axis=1) & (np.linalg.norm(quats, axis=1) > 0.5)
     body_quats = np.full((len(rows), 4), np.nan)
-    for index in np.flatnonzero(good):
-        body_rotation = _matrix(quats[index]) @ model.principal[index].T
-        body_quats[index] = np.roll(Rotation.from_matrix(body_rotation).as_quat(), 1)
+    if good.any():  # all bodies in one call each: the read-back runs once per sample
+        body_rotations = (Rotation.from_quat(quats[good]).as_matrix()
+                          @ np.transpose(model.principal[good], (0, 2, 1)))
+        body_quats[good] = Rotation.from_matrix(body_rotations).as_quat(scalar_first=True)
     return BodyStates(position=np.array([row[0] for row in rows], dtype=float),
                       quaternion=body_quats,
                       velocity=np.array([row[6] for row in rows], dtype=float),
