@@ -43,7 +43,7 @@ def _simulate(adapter, model, mech, method: str, dt: float, t_end: float):
 
 
 def overhead_rows(adapters=None, scenarios=OVERHEAD_SCENARIOS, methods=("default", "best"),
-                  dt: float = 1e-3, t_end: float = 1.0, repeats: int = 5) -> list[dict]:
+                  dt: float = 1e-3, t_end: float = 4.0, repeats: int = 5) -> list[dict]:
     """Adapter time per step over bare-loop time per step, per adapter, scenario and method.
 
     Returns

@@ -290,7 +290,7 @@ def cmd_bench(args) -> int:
     if "front" in parts:
         _bench_front(args)
     if "overhead" in parts:
-        print("\nadapter time per step / bare loop time per step (dt 1e-3 s, 1 s, best of 5)")
+        print("\nadapter time per step / bare loop time per step (dt 1e-3 s, 4 s, best of 5)")
         rows = bench.overhead_rows()
         _print_table([{**r, **{k: _number(r[k]) for k in ("adapter_us_per_step", "bare_us_per_step",
                                                           "ratio", "read_back_us_per_sample")}}
