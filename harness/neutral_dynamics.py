@@ -206,9 +206,10 @@ def _check_unique(mech: Mechanism, mass: np.ndarray, jacobian: np.ndarray) -> No
         return
     motion = (free @ motions[:, 0]).reshape(len(mech.bodies), -1)
     body = mech.bodies[int(np.argmax(np.linalg.norm(motion, axis=1)))].name
+    spread = max(moments[0], 0.0) / moments[-1] if moments[-1] > 0.0 else 0.0
     raise IndeterminateAccelerations(
         f"mechanism {mech.name!r}: accelerations are not unique: the mass matrix is singular on "
-        f"a motion the joints allow (eigenvalue ratio {max(moments[0], 0.0) / moments[-1]:.2g} "
+        f"a motion the joints allow (eigenvalue ratio {spread:.2g} "
         f"≤ {UNIQUENESS_RATIO:g}), mostly of body {body!r} (a zero principal moment free to "
         f"turn about its axis?)")
 
