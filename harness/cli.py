@@ -299,7 +299,7 @@ def cmd_bench(args) -> int:
                                        "note"])
     if "scaling" in parts:
         members = tuple(n for n in bench.SCALING_N if n <= args.scaling_max)
-        print(f"\ncost per simulated second on n_fourbar@N (best, dt 1e-3 s, 0.5 s), s/s")
+        print("\ncost per simulated second on n_fourbar@N (best, dt 1e-3 s, 0.5 s), s/s")
         rows, exponents = bench.scaling_rows(members=members)
         table = {}
         for row in rows:

@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.base import RunFailure, RunGrid, Stepper
+from adapters.base import RunFailure, RunGrid
 from adapters.inhouse import compiled
-from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.kinematics import common_start
+from adapters.inhouse.driver import FormulationStepper
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
 from adapters.inhouse.states import body_states
@@ -40,7 +39,7 @@ def has_compiled_path(integrator_name: str, formulation_name: str) -> bool:
             and issubclass(integrator_class(integrator_name), NystromIntegrator))
 
 
-class CompiledStepper(Stepper):
+class CompiledStepper(FormulationStepper):
     """One fixed-step run of ``formulation_class`` by the Nyström tableau of ``integrator_name``.
 
     Parameters
@@ -57,14 +56,8 @@ class CompiledStepper(Stepper):
 
     def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
                  integrator_params: dict, formulation_params: dict, grid: RunGrid):
-        super().__init__()
-        self.grid = grid
-        self.layout = layout_of(mech)
-        assembly = common_start(mech)
-        self._start_state = (assembly.q, assembly.v)
-        formulation = formulation_class(mech, assembly.q, grid.dt, **formulation_params)
-        self.formulation = formulation
-        self.notes = list(formulation.notes)
+        super().__init__(mech, formulation_class, formulation_params, grid)
+        formulation = self.formulation
         self._code = COMPILED_FORMULATIONS[formulation_class.name]
         tableau = integrator_class(integrator_name).tableau
         self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
@@ -79,7 +72,7 @@ class CompiledStepper(Stepper):
         self._counters = np.zeros(4, dtype=np.int64)
         self._check_due = np.zeros(1, dtype=np.int64)
         self._partition = None
-        self._restart(assembly.q, assembly.v)
+        self._restart(*self._start_state)
         self._run(0)  # compile (or load from numba's cache) outside the timed stepping
 
     # -- the integrated state ----------------------------------------------------------------

@@ -34,7 +34,32 @@ PROJECTED_SAMPLES_NOTE = ("adaptive steps with projection: states between steps 
                           "002 eq. 127, velocities eq. 137); the projection is not counted")
 
 
-class InhouseStepper(Stepper):
+class FormulationStepper(Stepper):
+    """What the in-house steppers share: the body layout, the common start
+    (:func:`~adapters.inhouse.kinematics.common_start`) and the formulation built there.
+
+    Parameters
+    ----------
+    mech : Mechanism
+    formulation_class : type[Formulation]
+    formulation_params : dict
+        Resolved parameters of the formulation.
+    grid : RunGrid
+    """
+
+    def __init__(self, mech: Mechanism, formulation_class, formulation_params: dict,
+                 grid: RunGrid):
+        super().__init__()
+        self.grid = grid
+        self.layout = layout_of(mech)
+        assembly = common_start(mech)
+        self._start_state = (assembly.q, assembly.v)
+        self.formulation: Formulation = formulation_class(mech, assembly.q, grid.dt,
+                                                          **formulation_params)
+        self.notes = list(self.formulation.notes)
+
+
+class InhouseStepper(FormulationStepper):
     """One run of ``formulation_class`` integrated by ``integrator_name``.
 
     Parameters
@@ -57,24 +82,18 @@ class InhouseStepper(Stepper):
 
     def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
                  integrator_params: dict, formulation_params: dict, grid: RunGrid):
-        super().__init__()
-        self.grid = grid
-        self.layout = layout_of(mech)
-        assembly = common_start(mech)
-        self._start_state = (assembly.q, assembly.v)
-        formulation = formulation_class(mech, assembly.q, grid.dt, **formulation_params)
-        formulation.start(assembly.q, assembly.v)
-        formulation.warm_up(assembly.q, assembly.v)
-        self.formulation: Formulation = formulation
+        super().__init__(mech, formulation_class, formulation_params, grid)
+        formulation, (q0, v0) = self.formulation, self._start_state
+        formulation.start(q0, v0)
+        formulation.warm_up(q0, v0)
         self.integrator_name, self.integrator_params = integrator_name, integrator_params
         self._spent = dict.fromkeys(_INTEGRATOR_COUNTERS, 0)
         self._banked_steps = 0
         self.integrator = None
-        self._restart(0.0, assembly.q, assembly.v)
+        self._restart(0.0, q0, v0)
         self._adaptive = self.integrator.adaptive
         corrects = type(formulation).project is not SecondOrderSystem.project
         self._project_samples = self._adaptive and corrects
-        self.notes = list(formulation.notes)
         if self._project_samples:
             self.notes.append(PROJECTED_SAMPLES_NOTE)
         self._repartition_due = False
