@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from conftest import VERIFIED_SCENES
 
-from adapters.base import UnsupportedCase
+from adapters.base import RunFailure, UnsupportedCase
 from adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
 from harness.initial import initial_state
 from harness.energy import energy_balance
@@ -123,7 +123,9 @@ def test_engine_model_holds_the_scenario(name, rotation):
 #: Runs that fail at their first step, measured, with the words of their reason: Exudyn's dense
 #: LU finds the Jacobian of Bricard's overconstrained loop singular (``best`` sets
 #: ignoreSingularJacobian and runs); ``best``'s Newton tolerance (rtol 1e-12) is out of reach with
-#: the 2.5e9 N/m spring of stiff_fourbar (rtol 1e-8 runs).
+#: the 2.5e9 N/m spring of stiff_fourbar (rtol 1e-8 runs): whether its first step still
+#: converges is round-off (it failed in step 1 on the CI machine, in step 2 on an AMD EPYC), so
+#: these runs are checked for the failure and the start sample, not for the step it came at.
 FAILS_AT_START = {
     ("bricard", "default"): "Jacobian seems to be singular",
     ("bricard", "default:rotation=rotvec"): "Jacobian seems to be singular",
@@ -138,7 +140,7 @@ def test_first_sample_is_the_harness_initial_state(adapter, name, method):
     start = initial_state(mech)
     if (name, method) in FAILS_AT_START:
         assert traj.status == "failed" and FAILS_AT_START[name, method] in traj.reason
-        assert traj.n_samples == 1 and traj.times[0] == 0.0
+        assert traj.failure_time < 2e-3 and traj.times[0] == 0.0
     else:
         assert traj.status == "ok" and traj.n_samples == 3 and traj.times[0] == 0.0
     for field in ("position", "quaternion", "velocity", "angular_velocity"):
@@ -152,6 +154,23 @@ def test_counters_and_steps(adapter):
     assert traj.counters["newton_iterations"] >= traj.steps
     assert traj.counters["jacobian_evals"] >= 1
     assert traj.wall_time_s > 0
+
+
+@pytest.mark.parametrize("method", ["default", "best"])
+def test_bare_loop_returns_its_time(adapter, method):
+    assert adapter.bare_loop(adapter.build(load("fourbar")), method, 1e-3, 20) > 0.0
+
+
+def test_bare_loop_of_a_failing_solve_raises():
+    """Bricard with ``default`` fails at its first step (FAILS_AT_START): no yardstick."""
+    adapter = ExudynAdapter()
+    with pytest.raises(RunFailure, match="singular"):
+        adapter.bare_loop(adapter.build(load("bricard")), "default", 1e-3, 20)
+
+
+def test_system_without_sensors_holds_none():
+    system = ExudynSystem(load("fourbar"), "ep", sensors=False)
+    assert system.mbs.systemData.NumberOfSensors() == 0
 
 
 # --- accuracy ---------------------------------------------------------------------------------

@@ -113,9 +113,19 @@ class _Run:
 
 
 class ExudynSystem:
-    """One Exudyn ``SystemContainer`` holding ``mech`` at its assembled start."""
+    """One Exudyn ``SystemContainer`` holding ``mech`` at its assembled start.
 
-    def __init__(self, mech: Mechanism, rotation: str):
+    Parameters
+    ----------
+    mech : Mechanism
+    rotation : {"ep", "rotvec"}
+        Node type of spatial bodies (see the module notes).
+    sensors : bool
+        Add the body sensors :meth:`sensed` reads (False: a system that is only solved, for
+        :meth:`~adapters.exudyn_adapter.adapter.ExudynAdapter.bare_loop`).
+    """
+
+    def __init__(self, mech: Mechanism, rotation: str, sensors: bool = True):
         self.mech = mech
         self.rotation = rotation
         self.start = initial_state(mech)
@@ -129,7 +139,7 @@ class ExudynSystem:
         for force in mech.forces:
             self._add_force(force)
         self.sensors = {key: [self._add_sensor(body, key) for body in self.bodies]
-                        for key in _SENSED}
+                        for key in (_SENSED if sensors else ())}
         self.mbs.Assemble()
 
     # --- bodies -------------------------------------------------------------------------------
