@@ -10,6 +10,8 @@ parameter, only the defaults differ.
 
 from __future__ import annotations
 
+import time
+
 import pinocchio as pin
 
 from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
@@ -17,7 +19,7 @@ from adapters.integrators import RUNNING, integrator_names, make_integrator
 from adapters.pinocchio_adapter.build import PinocchioModel, build_model
 from adapters.pinocchio_adapter.dynamics import SolverSettings
 from adapters.pinocchio_adapter.state import body_states, joint_state
-from adapters.pinocchio_adapter.stepping import constrained_problem
+from adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
 from harness.initial import initial_state
 from harness.model import Mechanism
 from harness.trajectory import BodyStates
@@ -93,6 +95,26 @@ class PinocchioAdapter(Adapter):
                 "notes": f"Pinocchio nq = {model.model.nq} (tree joints), "
                          f"{len(model.constraints)} rigid constraint(s) with {rows} rows closing "
                          f"the loops"}
+
+    def bare_loop(self, model: PinocchioModel, method: str, dt: float, n_steps: int) -> float:
+        """The plain loop alone (:func:`.stepping.bare_steps`): ``n_steps`` steps of the method's
+        explicit one-step integrator calling ``pin.constraintDynamics`` and ``pin.integrate``,
+        with the method's projection, from the start :meth:`simulate` uses; no samples, no
+        counters, no checks.  The start's conversion to joint coordinates is off the clock.
+
+        Raises
+        ------
+        UnsupportedCase
+            For an integrator that is not an explicit one-step method.
+        """
+        spec, params = self.method_spec(method)
+        self._check_params(spec, params)
+        problem = constrained_problem(model, solver_settings(params))
+        q, v = joint_state(model, problem.kin_data, initial_state(model.mechanism))
+        rule = bare_rule(problem, params["integrator"])
+        began = time.perf_counter()
+        bare_steps(problem, rule, q, v, dt, n_steps)
+        return time.perf_counter() - began
 
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
         if params["integrator"] not in integrator_names():

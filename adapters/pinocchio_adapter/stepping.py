@@ -14,6 +14,10 @@ cylindrical composite; R^k or the circle) need no correction and keep the plain 
 Nyström tableaus that are not Runge–Kutta methods (rkn4) also need the chart's second derivative,
 which Pinocchio does not expose; the integrator refuses them on a non-commutative model with a
 clear message (the adapter reports the case as unsupported).
+
+:func:`bare_steps` is the yardstick of the adapter's overhead (``Adapter.bare_loop``): the same
+explicit one-step rule, Pinocchio's constraint dynamics and ``pin.integrate`` and the same
+projection, in a plain loop without the integrator's bookkeeping, counters or checks.
 """
 
 from __future__ import annotations
@@ -21,6 +25,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from adapters.base import UnsupportedCase
+from adapters.integrators import integrator_class
+from adapters.integrators.nystrom import NystromIntegrator, munthe_kaas_step, nystrom_step
 from adapters.pinocchio_adapter.build import PinocchioModel
 from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
 
@@ -60,3 +67,66 @@ def constrained_problem(pm: PinocchioModel, settings: SolverSettings) -> Constra
     spherical, free-flyer or planar joint, else the plain :class:`ConstrainedProblem`."""
     problem_class = ConstrainedProblem if is_commutative(pm.model) else LieGroupProblem
     return problem_class(pm, settings)
+
+
+def bare_rule(problem: ConstrainedProblem, integrator: str) -> tuple:
+    """The step rule the integrator ``integrator`` picks on ``problem``, for :func:`bare_steps`.
+
+    Returns
+    -------
+    step : callable
+        :func:`~adapters.integrators.nystrom.nystrom_step`, or
+        :func:`~adapters.integrators.nystrom.munthe_kaas_step` for a Runge–Kutta tableau on a
+        non-commutative tree.
+    stepped : callable or ConstrainedProblem
+        Its second argument: ``problem.advance``, or ``problem`` for Munthe-Kaas.
+    tableau : NystromTableau
+
+    Raises
+    ------
+    UnsupportedCase
+        For a method that is not an explicit one-step method, or a Nyström tableau that needs
+        the exponential chart on a non-commutative tree.
+    """
+    method = integrator_class(integrator)
+    if not issubclass(method, NystromIntegrator):
+        raise UnsupportedCase(f"{integrator} is not an explicit one-step method: no bare loop")
+    tableau = method.tableau
+    if not isinstance(problem, LieGroupProblem) or (method.order <= 1
+                                                   and not tableau.runge_kutta):
+        return nystrom_step, problem.advance, tableau
+    if tableau.runge_kutta:
+        return munthe_kaas_step, problem, tableau
+    raise UnsupportedCase(f"{integrator} on a non-commutative tree steps in the exponential "
+                          "chart, which Pinocchio does not provide")
+
+
+def bare_steps(problem: ConstrainedProblem, rule: tuple, q: np.ndarray, v: np.ndarray,
+               dt: float, n_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """``n_steps`` steps of ``dt`` (s) of ``rule`` (:func:`bare_rule`) from ``(q, v)``, each
+    followed by ``problem.project``: Pinocchio's constraint dynamics
+    (:meth:`ConstrainedProblem.engine_acceleration`) and ``pin.integrate`` in a plain loop.
+
+    Parameters
+    ----------
+    problem : ConstrainedProblem
+    rule : tuple
+        ``(step, stepped, tableau)`` from :func:`bare_rule`.
+    q : ndarray, shape (nq,)
+    v : ndarray, shape (nv,)
+    dt : float
+        s.
+    n_steps : int
+
+    Returns
+    -------
+    q : ndarray, shape (nq,)
+    v : ndarray, shape (nv,)
+    """
+    step, stepped, tableau = rule
+    acceleration, project = problem.engine_acceleration, problem.project
+    for k in range(n_steps):
+        t = k * dt
+        q, v = step(acceleration, stepped, t, q, v, dt, tableau)
+        q, v = project(t + dt, q, v)
+    return q, v
