@@ -106,6 +106,13 @@ ORDER_RUN = (0.05, 1e-3, np.linspace(0.0, 0.05, 6))
 #: Exudyn 2.4e-11, PyBullet 3.9e-12, MuJoCo 1.2e-13, in-house 1.1e-14, Pinocchio 5.3e-15.
 #: (Before the spanning tree broke ties by name: MuJoCo 1.25e-5, PyBullet 1.7e-3.)
 ORDER_TOLERANCE = 1e-9
+#: (c) Exudyn's bound where not :data:`ORDER_TOLERANCE`: slender bars (a zero principal moment)
+#: make its index-3 Newton system ill-conditioned, so another pivot order leaves round-off larger
+#: by that condition.  Measured 2026-11-25: 2.77e-9 on generated-0d00a9b6f134 (six bodies on
+#: revolutes to ground, two of them slender) in one full slow run, 1.1e-9 on its 8-digit repr,
+#: and 2.2e-16 on the same mechanism with the zero moments raised to 1/12 kg·m²; the other
+#: examples of two 200-example runs ≤ 2e-11.
+ORDER_TOLERANCE_EXUDYN = 1e-8
 #: (c) Method of the order runs where not ``best``: PyBullet's ``best`` exits its solver at
 #: Bullet's residual threshold (1e-7), so where it stops depends on round-off, and the two orders'
 #: states differ by up to 2.6e-4 (38 of the 200 slow examples above 1e-9, measured 2026-11-24);
@@ -351,7 +358,8 @@ def order_gap(name: str, pair) -> float | None:
 
 def _check_order(name: str, pair) -> None:
     worst = order_gap(name, pair)
-    assert worst is None or worst <= ORDER_TOLERANCE, \
+    bound = ORDER_TOLERANCE_EXUDYN if name == "exudyn" else ORDER_TOLERANCE
+    assert worst is None or worst <= bound, \
         f"{name}: two declaration orders differ by {worst:.3g}"
 
 
