@@ -58,6 +58,53 @@ def _inertia_certified(mass, inertia, cut):
 
 
 @njit(cache=True)
+def _inverse_3x3(matrix):
+    """Inverse of a (3, 3) matrix by its adjugate, shape (3, 3); only called on inertias that
+    :func:`_inertia_certified` accepted (condition below 1/cut)."""
+    a = matrix
+    inverse = np.empty((3, 3))
+    inverse[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    inverse[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
+    inverse[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
+    inverse[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    inverse[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
+    inverse[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
+    inverse[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    inverse[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
+    inverse[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    determinant = a[0, 0] * inverse[0, 0] + a[0, 1] * inverse[1, 0] + a[0, 2] * inverse[2, 0]
+    return inverse / determinant
+
+
+@njit(cache=True)
+def _euler_block_solve(out, rhs, theta, inertia_inverse, c):
+    """out[:] = B⁻¹ rhs for the rotational block B = Ḡᵀ J̄ Ḡ + c θθᵀ of one body, rhs and out
+    (4, k), ``inertia_inverse`` J̄⁻¹ (3, 3), c > 0.
+
+    With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
+    length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
+    and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: per column two products with E and one with J̄⁻¹,
+    instead of assembling B and factorising it.
+    """
+    g = g_bar(theta)
+    size = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2] \
+        + theta[3] * theta[3]
+    rotational, normal = 1.0 / (4.0 * size), 1.0 / size
+    y, z = np.empty(3), np.empty(3)
+    for col in range(rhs.shape[1]):
+        for r in range(3):
+            y[r] = rotational * (g[r, 0] * rhs[0, col] + g[r, 1] * rhs[1, col]
+                                 + g[r, 2] * rhs[2, col] + g[r, 3] * rhs[3, col])
+        along = normal * normal / c * (theta[0] * rhs[0, col] + theta[1] * rhs[1, col]
+                                       + theta[2] * rhs[2, col] + theta[3] * rhs[3, col])
+        for r in range(3):
+            z[r] = rotational * (inertia_inverse[r, 0] * y[0] + inertia_inverse[r, 1] * y[1]
+                                 + inertia_inverse[r, 2] * y[2])
+        for r in range(4):
+            out[r, col] = g[0, r] * z[0] + g[1, r] * z[1] + g[2, r] * z[2] + theta[r] * along
+
+
+@njit(cache=True)
 def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row, cut):
     """q̈ of the augmented system (002 eq. 77) for Euler-parameter bodies with a block-diagonal
     mass matrix, every constraint row included.
@@ -65,7 +112,7 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     The rotational block Ḡᵀ J̄ Ḡ is singular along θ; the normalisation row 2θᵀθ̈ = γ_θ fixes
     θᵀθ̈, so adding c θθᵀ to the block and c θ γ_θ/2 to the force leaves q̈ unchanged
     (c = 4 tr J̄ / 3, the mean of the block's other eigenvalues 4 J̄_i on the manifold).  The
-    block-diagonal M' is solved body by body, S = Φ_q M'⁻¹ Φ_qᵀ by
+    block-diagonal M' is solved body by body (:func:`_euler_block_solve`), S = Φ_q M'⁻¹ Φ_qᵀ by
     :func:`~adapters.inhouse.linalg.certified_spd_solve`.
 
     Returns
@@ -92,10 +139,8 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     for b in range(masses.shape[0]):
         k = b * nc
         solved[k:k + 3] = rhs[k:k + 3] / masses[b]
-        theta = q[k + 3:k + 7]
-        g = g_bar(theta)
-        block = g.T @ inertias[b] @ g + 4.0 * np.trace(inertias[b]) / 3.0 * np.outer(theta, theta)
-        solved[k + 3:k + 7] = np.linalg.solve(block, np.ascontiguousarray(rhs[k + 3:k + 7]))
+        _euler_block_solve(solved[k + 3:k + 7], rhs[k + 3:k + 7], q[k + 3:k + 7],
+                           _inverse_3x3(inertias[b]), 4.0 * np.trace(inertias[b]) / 3.0)
     columns, free = np.ascontiguousarray(solved[:, :m]), np.ascontiguousarray(solved[:, m])
     certified, mu = certified_spd_solve(jac @ columns, target - jac @ free, cut)
     if not certified:
@@ -141,9 +186,24 @@ def _inertial_forces(q, v, nc, masses, gravity, inertias):
         if nc == PLANAR_NC:
             continue
         g = g_bar(q[k + 3:k + 7])
-        omega = g @ v[k + 3:k + 7]
-        force[k + 3:k + 7] = -(g.T @ np.cross(omega, inertias[b] @ omega))
+        omega = np.empty(3)
+        for r in range(3):
+            omega[r] = g[r, 0] * v[k + 3] + g[r, 1] * v[k + 4] + g[r, 2] * v[k + 5] \
+                + g[r, 3] * v[k + 6]
+        spin = inertias[b] @ omega
+        gyroscopic = np.array([omega[1] * spin[2] - omega[2] * spin[1],
+                               omega[2] * spin[0] - omega[0] * spin[2],
+                               omega[0] * spin[1] - omega[1] * spin[0]])
+        _add_g_bar_transpose(force, k + 3, g, gyroscopic, -1.0)
     return force
+
+
+@njit(cache=True)
+def _add_g_bar_transpose(out, start, g, vector, sign):
+    """out[start:start + 4] += sign · Ḡᵀ vector, g = Ḡ (3, 4), vector (3,)."""
+    for c in range(4):
+        out[start + c] += sign * (g[0, c] * vector[0] + g[1, c] * vector[1]
+                                  + g[2, c] * vector[2])
 
 
 @njit(cache=True)
@@ -171,14 +231,15 @@ def _add_torque(out, q, nc, body, n):
     if nc == PLANAR_NC:
         out[k + 2] += n[2]
         return
-    # Ḡᵀ Aᵀ n: Aᵀ n is the torque in body axes.
+    # Ḡᵀ Aᵀ n: Aᵀ n = (2e₀² − 1) n + 2e (eᵀn) − 2e₀ (e × n) is the torque in body axes
+    # (002 eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
     theta = q[k + 3:k + 7]
-    local = np.zeros(3)
-    for col in range(3):
-        e = np.zeros(3)
-        e[col] = 1.0
-        local[col] = rotate(q, nc, body, e) @ n
-    out[k + 3:k + 7] += g_bar(theta).T @ local
+    e0, e1, e2, e3 = theta[0], theta[1], theta[2], theta[3]
+    scale, along = 2.0 * e0 * e0 - 1.0, 2.0 * (e1 * n[0] + e2 * n[1] + e3 * n[2])
+    local = np.array([scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
+                      scale * n[1] + along * e2 - 2.0 * e0 * (e3 * n[0] - e1 * n[2]),
+                      scale * n[2] + along * e3 - 2.0 * e0 * (e1 * n[1] - e2 * n[0])])
+    _add_g_bar_transpose(out, k + 3, g_bar(theta), local, 1.0)
 
 
 F_JOINT_TORQUE, F_JOINT_FORCE, F_POINT, F_TORQUE, F_SPRING = range(5)
