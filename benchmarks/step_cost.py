@@ -2,69 +2,94 @@
 
 Run:  .venv/bin/python benchmarks/step_cost.py
 
-For rk4+baumgarte and rk4+direct on fourbar and slider_crank it prints the wall time per step
-(median of three 1 s runs at dt = 1e-3, after a warm-up that compiles the kernels) and the cost of
-one call of each compiled kernel at the assembled state, so the share of the step spent in compiled
-arithmetic versus Python glue can be read off side by side.  Numbers are measured on the machine
+For rk4+baumgarte and rk4+direct on fourbar and slider_crank it prints the wall time per step of
+the compiled loop alone (``Adapter.bare_loop``, best of five 1 s runs at dt = 1e-3), then the cost
+of one call of each piece of a right-hand side at the assembled state, each timed inside a
+compiled loop (so without Python's call overhead): Φ_q, γ, the forces Q_e + Q_v, the projection
+of ``direct`` (002 eq. 127 and 137), and the whole fused acceleration
+(:func:`~adapters.inhouse.dynamics.index1_acceleration`: the pieces plus the mass matrix solve).
+RK4 makes four right-hand sides and one projection per step.  Numbers are measured on the machine
 that runs the script; nothing here is asserted.
 """
 
 from __future__ import annotations
 
-import statistics
-import timeit
+import time
+
+import numpy as np
+from numba import njit
 
 from adapters import get_adapter
-from adapters.inhouse.dynamics import solve_augmented
-from adapters.inhouse.kinematics import assemble
-from adapters.inhouse.stabilisation import NoStabilisation
+from adapters.base import RunGrid
+from adapters.inhouse import kernels
+from adapters.inhouse.compiled import _project
+from adapters.inhouse.dynamics import forces_kernel, index1_acceleration
 from harness import scenario
-from harness.sampling import sample_times
 
 CASES = [("fourbar", "rk4+baumgarte"), ("fourbar", "rk4+direct"),
          ("slider_crank", "rk4+baumgarte"), ("slider_crank", "rk4+direct")]
-DT, T_END = 1e-3, 1.0
+DT, STEPS, CALLS = 1e-3, 1000, 20000
 
 
 def per_step_us(name: str, method: str) -> float:
-    adapter = get_adapter("inhouse")
-    mech = scenario.load(name)
-    times = sample_times(DT, T_END)
-    adapter.simulate(mech, method, DT, 0.01, times[:2])  # compile and warm caches
-    runs = [adapter.simulate(mech, method, DT, T_END, times) for _ in range(3)]
-    return statistics.median(1e6 * r.wall_time_s / r.steps for r in runs)
+    """Best of five bare compiled loops of ``STEPS`` steps, µs per step."""
+    adapter, mech = get_adapter("inhouse"), scenario.load(name)
+    return 1e6 * min(adapter.bare_loop(mech, method, DT, STEPS) for _ in range(5)) / STEPS
+
+
+#: The pieces timed by :func:`_calls`, in its ``piece`` codes' order.
+PIECES = ("jacobian", "gamma", "forces", "projection", "whole acceleration")
+
+
+@njit
+def _calls(piece, q, v, rows, constraint_args, dynamics_args, sparsity_arrays, n):
+    """``n`` calls of one piece (index into :data:`PIECES`); a sum so none is optimised away."""
+    total = 0.0
+    counters = np.zeros(4, dtype=np.int64)
+    for _ in range(n):
+        if piece == 0:
+            total += kernels.jacobian(q, 0.0, *constraint_args)[0, 0]
+        elif piece == 1:
+            total += kernels.gamma(q, v, 0.0, *constraint_args)[0]
+        elif piece == 2:
+            total += forces_kernel(q, v, *dynamics_args)[0]
+        elif piece == 3:
+            total += _project(q, v, 0.0, rows, 1e-12, 10, 1e-10, constraint_args,
+                              sparsity_arrays, counters)[0][0]
+        else:
+            total += index1_acceleration(q, v, 0.0, 0.0, 0.0, rows, constraint_args,
+                                         dynamics_args, sparsity_arrays)[0]
+    return total
 
 
 def kernel_us(name: str) -> dict:
-    """Microseconds per call of each piece of one right-hand-side evaluation."""
-    mech = scenario.load(name)
-    assembly = assemble(mech)
-    formulation = NoStabilisation(mech, assembly.q, DT)
-    q, v = assembly.q, assembly.v + 0.1
-    mass, force = formulation.dynamics.mass_and_forces(0.0, q, v)
-    jac = formulation.jacobian(0.0, q)
-    gamma = formulation.gamma(0.0, q, v)
-    pieces = {
-        "jacobian": lambda: formulation.constraints.jacobian(q),
-        "gamma": lambda: formulation.constraints.gamma(q, v),
-        "mass+forces": lambda: formulation.dynamics.mass_and_forces(0.0, q, v),
-        "augmented solve": lambda: solve_augmented(mass, jac, force, gamma),
-        "whole acceleration()": lambda: formulation.acceleration(0.0, q, v),
-    }
-    return {key: 1e6 * min(timeit.repeat(f, number=200, repeat=5)) / 200 for key, f in pieces.items()}
+    """Microseconds per call of each piece (best of five loops of ``CALLS`` calls)."""
+    adapter, mech = get_adapter("inhouse"), scenario.load(name)
+    spec, params = adapter.method_spec("rk4+direct")
+    stepper = adapter._start(mech, spec, params, RunGrid(DT, DT, np.zeros(1), True))
+    _, rows, constraint_args, dynamics_args, sparsity_arrays = stepper._model
+    arguments = (stepper.q, stepper.v + 0.1, rows, constraint_args, dynamics_args,
+                 sparsity_arrays)
+    costs = {}
+    for piece, key in enumerate(PIECES):
+        _calls(piece, *arguments, 1)  # compile
+        best = np.inf
+        for _ in range(5):
+            began = time.perf_counter()
+            _calls(piece, *arguments, CALLS)
+            best = min(best, time.perf_counter() - began)
+        costs[key] = 1e6 * best / CALLS
+    return costs
 
 
 def main() -> None:
-    print(f"per-step wall time, dt = {DT:g} s over {T_END:g} s (median of 3)")
+    print(f"compiled loop, µs per step, dt = {DT:g} s ({STEPS} steps, best of 5)")
     for name, method in CASES:
         print(f"  {name:14s} {method:15s} {per_step_us(name, method):8.1f} µs/step")
     for name in ("fourbar", "slider_crank"):
         costs = kernel_us(name)
-        compiled = sum(v for k, v in costs.items() if k != "whole acceleration()")
-        whole = costs["whole acceleration()"]
-        print(f"one right-hand side on {name}: " + ", ".join(f"{k} {v:.1f} µs" for k, v in costs.items()))
-        print(f"  compiled kernels {compiled:.1f} µs of {whole:.1f} µs "
-              f"({100 * compiled / whole:.0f} %); RK4 makes 4 per step")
+        print(f"one call on {name}, µs (inside a compiled loop): "
+              + ", ".join(f"{k} {v:.2f}" for k, v in costs.items()))
 
 
 if __name__ == "__main__":
