@@ -113,18 +113,16 @@ class _MujocoStepper(Stepper):
         self._previous = _set_start(built, self.model, self.data,
                                     initial_state(built.mechanism)).quaternion
         self.stepping = Stepping(self.model, self.data, built.loads)
-        # Bound once: _step_to runs per sample, on the clock.
-        self._dt, self._run, self._warnings = grid.dt, self.stepping.run, self.stepping.warnings
 
     def _step_to(self, t: float) -> None:
-        count = round(t / self._dt) - self.steps  # RunGrid.steps inlined
+        count = self.grid.steps(t) - self.steps
         if count <= 0:
             return
-        self._run(count)
-        if any(self._warnings.tolist()):
+        self.stepping.run(count)
+        if self.stepping.diverged():
             self._diverged(count)
         self.steps += count
-        self.t_good = self.steps * self._dt
+        self.t_good = self.steps * self.grid.dt
 
     def _diverged(self, count: int) -> None:
         """End the run at the step of the last ``count`` that raised a warning."""
@@ -133,7 +131,7 @@ class _MujocoStepper(Stepper):
             raise RuntimeError("MuJoCo raised a divergence warning that a replay of the run did "
                                "not reproduce")
         self.steps += bad
-        self.t_good = (self.steps - 1) * self._dt
+        self.t_good = (self.steps - 1) * self.grid.dt
         raise RunFailure("diverged", "MuJoCo raised a bad qpos/qvel/qacc warning (it would "
                                      "reset and carry on)")
 

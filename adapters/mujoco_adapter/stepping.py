@@ -21,11 +21,6 @@ DIVERGENCE_WARNINGS = slice(int(mujoco.mjtWarning.mjWARN_BADQPOS),
 _STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 
 
-def _diverged(data: mujoco.MjData) -> bool:
-    """True when a divergence warning was raised since :func:`_clear_warnings`."""
-    return any(data.warning.number[DIVERGENCE_WARNINGS].tolist())
-
-
 def _clear_warnings(data: mujoco.MjData) -> None:
     """Zero the divergence warning counters.
 
@@ -58,26 +53,16 @@ def _steps(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads) -> Callabl
     return functools.partial(mujoco.mj_step, model, data)
 
 
-def _first_bad_step(model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads,
-                    count: int) -> int | None:
-    """Step ``count`` times one by one; the 1-based step that raised a divergence warning."""
-    _clear_warnings(data)
-    for step in range(1, count + 1):
-        _step_once(model, data, loads)
-        if _diverged(data):
-            return step
-    return None
-
-
 class Stepping:
     """The steps of one run and the divergence check after each chunk of them.
 
     A chunk runs as :attr:`run` (also the bare loop of
-    :meth:`adapters.mujoco_adapter.adapter.MujocoAdapter.bare_loop`); afterwards the caller reads
-    :attr:`warnings` (zeroed at the start, so any count means a divergence).  Only when one fired
-    is the run replayed (:meth:`first_bad_step`) — from the start state saved here, to the
-    chunk's start in one call, then step by step — to find the step: MuJoCo is deterministic, so
-    the replay retraces the run, and a good run pays for one counter read per chunk.
+    :meth:`adapters.mujoco_adapter.adapter.MujocoAdapter.bare_loop`); afterwards the caller asks
+    :meth:`diverged` (the counters are zeroed at the start, so any count means a divergence).
+    Only when one fired is the run replayed (:meth:`first_bad_step`) — from the start state saved
+    here, to the chunk's start in one call, then step by step — to find the step: MuJoCo is
+    deterministic, so the replay retraces the run, and a good run pays for one counter read per
+    chunk.
 
     Parameters
     ----------
@@ -89,8 +74,6 @@ class Stepping:
     ----------
     run : callable
         ``run(count)`` takes ``count`` steps with no checks (:func:`_steps`).
-    warnings : ndarray, shape (3,)
-        The bad qpos/qvel/qacc warning counters, a view into ``data``.
     """
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, loads: _Loads):
@@ -99,7 +82,11 @@ class Stepping:
         self._start = np.empty(mujoco.mj_stateSize(model, _STATE))
         mujoco.mj_getState(model, data, self._start, _STATE)
         _clear_warnings(data)
-        self.warnings = data.warning.number[DIVERGENCE_WARNINGS]
+        self._counters = data.warning.number[DIVERGENCE_WARNINGS]  # a view: read, not copied
+
+    def diverged(self) -> bool:
+        """True when a divergence warning was raised since the counters were last zeroed."""
+        return any(self._counters.tolist())
 
     def first_bad_step(self, taken: int, count: int) -> int | None:
         """The 1-based step of the last chunk that raised a warning, by replaying the run.
@@ -113,4 +100,9 @@ class Stepping:
         """
         mujoco.mj_setState(self.model, self.data, self._start, _STATE)
         self.run(taken)
-        return _first_bad_step(self.model, self.data, self.loads, count)
+        _clear_warnings(self.data)
+        for step in range(1, count + 1):
+            _step_once(self.model, self.data, self.loads)
+            if self.diverged():
+                return step
+        return None
