@@ -179,6 +179,34 @@ def chart_nystrom_step(acceleration, problem, t, q, v, h, tableau):
     return problem.advance(q, dq), problem.chart_velocity(q, dq, w)
 
 
+def step_rule(method, problem, acceleration):
+    """The step function ``rule(t, q, v, h, tableau) -> (q_new, v_new)`` that the
+    :class:`NystromIntegrator` subclass ``method`` takes on ``problem``, its stages calling
+    ``acceleration(t, q, v)``: :func:`nystrom_step` for a Euclidean or commutative configuration
+    space (no ``increment_rate`` on the problem) and for order ≤ 1, :func:`munthe_kaas_step` for a
+    Runge–Kutta tableau on a non-commutative group, else :func:`chart_nystrom_step`.
+
+    Raises
+    ------
+    ValueError
+        When the chart step needs ``chart_velocity`` or ``chart_acceleration`` and the problem
+        lacks them.
+    """
+    commutative = not hasattr(problem, "increment_rate")
+    if commutative or (method.order <= 1 and not method.tableau.runge_kutta):
+        return partial(nystrom_step, acceleration, problem.advance)
+    if method.tableau.runge_kutta:
+        return partial(munthe_kaas_step, acceleration, problem)
+    missing = [name for name in ("chart_velocity", "chart_acceleration")
+               if not hasattr(problem, name)]
+    if missing:
+        raise ValueError(f"method {method.name!r} on a non-commutative Lie group steps in the "
+                         f"exponential chart and needs the problem's {' and '.join(missing)}, "
+                         "which this problem does not provide; use a Runge–Kutta method "
+                         "(rk4, heun, euler), which needs only increment_rate")
+    return partial(chart_nystrom_step, acceleration, problem)
+
+
 class NystromIntegrator(Integrator):
     """Fixed-step explicit one-step method defined by the class attribute ``tableau``.
 
@@ -196,20 +224,7 @@ class NystromIntegrator(Integrator):
         self._rule = self._step_rule()
 
     def _step_rule(self):
-        problem = self.problem
-        commutative = not hasattr(problem, "increment_rate")
-        if commutative or (self.order <= 1 and not self.tableau.runge_kutta):
-            return partial(nystrom_step, self._acceleration, problem.advance)
-        if self.tableau.runge_kutta:
-            return partial(munthe_kaas_step, self._acceleration, problem)
-        missing = [name for name in ("chart_velocity", "chart_acceleration")
-                   if not hasattr(problem, name)]
-        if missing:
-            raise ValueError(f"method {self.name!r} on a non-commutative Lie group steps in the "
-                             f"exponential chart and needs the problem's {' and '.join(missing)}, "
-                             "which this problem does not provide; use a Runge–Kutta method "
-                             "(rk4, heun, euler), which needs only increment_rate")
-        return partial(chart_nystrom_step, self._acceleration, problem)
+        return step_rule(type(self), self.problem, self._acceleration)
 
     def _step_impl(self):
         t_new = self._target_time()

@@ -27,7 +27,7 @@ import pinocchio as pin
 
 from adapters.base import UnsupportedCase
 from adapters.integrators import integrator_class
-from adapters.integrators.nystrom import NystromIntegrator, munthe_kaas_step, nystrom_step
+from adapters.integrators.nystrom import NystromIntegrator, step_rule
 from adapters.pinocchio_adapter.build import PinocchioModel
 from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
 
@@ -70,16 +70,14 @@ def constrained_problem(pm: PinocchioModel, settings: SolverSettings) -> Constra
 
 
 def bare_rule(problem: ConstrainedProblem, integrator: str) -> tuple:
-    """The step rule the integrator ``integrator`` picks on ``problem``, for :func:`bare_steps`.
+    """The step rule the integrator ``integrator`` takes on ``problem``
+    (:func:`~adapters.integrators.nystrom.step_rule`), its stages calling Pinocchio directly
+    (:meth:`ConstrainedProblem.engine_acceleration`), for :func:`bare_steps`.
 
     Returns
     -------
     step : callable
-        :func:`~adapters.integrators.nystrom.nystrom_step`, or
-        :func:`~adapters.integrators.nystrom.munthe_kaas_step` for a Runge–Kutta tableau on a
-        non-commutative tree.
-    stepped : callable or ConstrainedProblem
-        Its second argument: ``problem.advance``, or ``problem`` for Munthe-Kaas.
+        ``step(t, q, v, h, tableau) -> (q_new, v_new)``.
     tableau : NystromTableau
 
     Raises
@@ -91,14 +89,10 @@ def bare_rule(problem: ConstrainedProblem, integrator: str) -> tuple:
     method = integrator_class(integrator)
     if not issubclass(method, NystromIntegrator):
         raise UnsupportedCase(f"{integrator} is not an explicit one-step method: no bare loop")
-    tableau = method.tableau
-    if not isinstance(problem, LieGroupProblem) or (method.order <= 1
-                                                   and not tableau.runge_kutta):
-        return nystrom_step, problem.advance, tableau
-    if tableau.runge_kutta:
-        return munthe_kaas_step, problem, tableau
-    raise UnsupportedCase(f"{integrator} on a non-commutative tree steps in the exponential "
-                          "chart, which Pinocchio does not provide")
+    try:
+        return step_rule(method, problem, problem.engine_acceleration), method.tableau
+    except ValueError as error:
+        raise UnsupportedCase(str(error)) from error
 
 
 def bare_steps(problem: ConstrainedProblem, rule: tuple, q: np.ndarray, v: np.ndarray,
@@ -111,7 +105,7 @@ def bare_steps(problem: ConstrainedProblem, rule: tuple, q: np.ndarray, v: np.nd
     ----------
     problem : ConstrainedProblem
     rule : tuple
-        ``(step, stepped, tableau)`` from :func:`bare_rule`.
+        ``(step, tableau)`` from :func:`bare_rule`.
     q : ndarray, shape (nq,)
     v : ndarray, shape (nv,)
     dt : float
@@ -123,10 +117,10 @@ def bare_steps(problem: ConstrainedProblem, rule: tuple, q: np.ndarray, v: np.nd
     q : ndarray, shape (nq,)
     v : ndarray, shape (nv,)
     """
-    step, stepped, tableau = rule
-    acceleration, project = problem.engine_acceleration, problem.project
+    step, tableau = rule
+    project = problem.project
     for k in range(n_steps):
         t = k * dt
-        q, v = step(acceleration, stepped, t, q, v, dt, tableau)
+        q, v = step(t, q, v, dt, tableau)
         q, v = project(t + dt, q, v)
     return q, v
