@@ -46,15 +46,22 @@ def _inertia_certified(mass, inertia, cut):
     """Whether a body's mass is positive and its inertia J̄ (3, 3) positive definite with
     λ_min > cut · λ_max: positive leading minors (Sylvester) make J̄ positive definite, and
     λ_min = det J̄ / (λ₂λ₃) ≥ det J̄ / (tr J̄)², so det J̄ > cut (tr J̄)³ gives λ_min > cut tr J̄
-    ≥ cut λ_max.  A few flops per body, so the
-    block solve below can refuse slender bars (a zero moment about their axis) and point masses
-    before a 4×4 factorisation divides by zero."""
+    ≥ cut λ_max.  A few flops per body, so the block solve below can refuse slender bars (a zero
+    moment about their axis) and point masses before it divides by a vanishing determinant."""
     if not mass > 0.0 or not inertia[0, 0] > 0.0:
         return False
     if not inertia[0, 0] * inertia[1, 1] - inertia[0, 1] * inertia[1, 0] > 0.0:
         return False
     trace = inertia[0, 0] + inertia[1, 1] + inertia[2, 2]
-    return np.linalg.det(inertia) > cut * trace * trace * trace
+    return _determinant_3x3(inertia) > cut * trace * trace * trace
+
+
+@njit(cache=True)
+def _determinant_3x3(a):
+    """det of a (3, 3) matrix by cofactors along its first row."""
+    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
+            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
+            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
 
 
 @njit(cache=True)
@@ -72,8 +79,7 @@ def _inverse_3x3(matrix):
     inverse[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
     inverse[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
     inverse[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-    determinant = a[0, 0] * inverse[0, 0] + a[0, 1] * inverse[1, 0] + a[0, 2] * inverse[2, 0]
-    return inverse / determinant
+    return inverse / _determinant_3x3(a)
 
 
 @njit(cache=True)
