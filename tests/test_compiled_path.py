@@ -24,7 +24,8 @@ from harness import scenario
 from harness.sampling import sample_times
 
 PATH_BOUND = 1e-10  # m and m/s (rad, rad/s on angles' velocities), see the module docstring
-METHODS = ("rk4+direct:proj_tol=1e-15", "rkn4+baumgarte", "heun+none", "rk4+partition")
+METHODS = ("rk4+direct:proj_tol=1e-15", "rkn4+baumgarte", "heun+none", "rk4+partition",
+           "rk8+direct")
 
 
 def _run(name: str, method: str, loop: str):

@@ -74,6 +74,15 @@ def test_convergence_order_on_fourbar(method, order, steps):
     assert abs(slope - order) <= 0.3, (slope, errors)
 
 
+def test_rk8_converges_at_least_at_its_order_on_fourbar():
+    # Over the full 4 s at dt = 5e-3 … 2e-3 the crank-angle errors (1.4e-8, 4.8e-10, 3.5e-11,
+    # 3.7e-12 rad, measured 2026-11-25) fit a slope of 8.98, pairwise 8.40, 9.07, 10.10: the
+    # error is still short of its asymptote (at 1e-2 s it is 1.3e-5, below 1e-3 s it reaches the
+    # reference's accuracy).  The bound asks for the order, not for the pre-asymptotic excess.
+    slope, errors = measured_order("fourbar", "rk8+direct", [5e-3, 1e-2 / 3, 2.5e-3, 2e-3], 4.0)
+    assert slope >= 7.5, (slope, errors)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("method,order,steps", ORDERS_SLOW)
 def test_convergence_order_of_multistep_methods_on_fourbar(method, order, steps):
