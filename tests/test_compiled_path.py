@@ -19,6 +19,8 @@ import numpy as np
 import pytest
 
 from adapters import get_adapter
+from adapters.base import RunGrid
+from adapters.inhouse import compiled
 from adapters.inhouse.linalg import certified_spd_solve, min_norm_solve, truncated_solve
 from harness import scenario
 from harness.sampling import sample_times
@@ -60,6 +62,27 @@ def test_a_divergence_is_reported_alike_on_both_paths():
     assert {(r.status, r.failure_time, r.reason, r.steps) for r in runs} == \
         {("diverged", 0.15, "state norm exceeds divergence_limit=1e+08", 15)}
     np.testing.assert_array_equal(runs[0].times, runs[1].times)
+
+
+def test_a_whole_run_in_one_call_hands_out_each_sample_and_refuses_to_go_back():
+    # The first _step_to integrates through every sample (compiled.run_samples); the states it
+    # hands out are those of stepping sample by sample (same calls, so equal to the bit).
+    mech, adapter = scenario.load("fourbar"), get_adapter("inhouse")
+    spec, params = adapter.method_spec("rk4+direct:loop=compiled")
+    grid = RunGrid(1e-3, 0.05, sample_times(1e-3, 0.05), True)
+    whole, stepwise = adapter._start(mech, spec, params, grid), \
+        adapter._start(mech, spec, params, grid)
+    for t in grid.sample_times:
+        whole._step_to(t)
+        stepwise.q, stepwise.v, stepwise.steps, _ = compiled.run_steps(
+            stepwise.q, stepwise.v, 0.0, grid.dt, stepwise.steps, grid.steps(t),
+            stepwise._tableau, stepwise._model, stepwise._code, stepwise._projection,
+            stepwise._partition, stepwise._check_due, stepwise._limit, stepwise._counters)
+        assert whole.steps == stepwise.steps
+        np.testing.assert_array_equal(whole.q, stepwise.q)
+        np.testing.assert_array_equal(whole.v, stepwise.v)
+    with pytest.raises(ValueError, match="step 25 was passed without its state being kept"):
+        whole._step_to(0.025)
 
 
 def test_an_unknown_loop_is_refused_by_name():

@@ -251,3 +251,41 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         q, v = q_new, v_new
         check_due[0] = 1
     return q, v, last, RUNNING
+
+
+@njit(cache=True)
+def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
+                partition, check_due, limit, counters, q_out, v_out):
+    """:func:`run_steps` from step ``first`` on through every step index of ``targets``, keeping
+    the state at each: a whole run in one call, for formulations whose states are read without
+    side effects (every one but partitioning, whose reading moves its Newton start).
+
+    Parameters
+    ----------
+    targets : ndarray of int64, shape (k,)
+        Increasing step indices, none before ``first``.
+    q_out, v_out : ndarray, shape (k, n)
+        Row i receives the state after step ``targets[i]``; rows from ``reached`` on are left
+        as they were.
+    (the others as :func:`run_steps`)
+
+    Returns
+    -------
+    q, v : ndarray
+        The last good state.
+    done : int
+        Index of the last good step.
+    status : int
+        :data:`RUNNING` when every target was reached, else the code of the failure.
+    reached : int
+        Number of targets whose state was stored.
+    """
+    for i in range(targets.shape[0]):
+        q, v, first, status = run_steps(q, v, t0, dt, first, targets[i], tableau, model,
+                                        stabilisation, projection, partition, check_due, limit,
+                                        counters)
+        if status != RUNNING:
+            return q, v, first, status, i
+        q_out[i] = q
+        v_out[i] = v
+    return q, v, first, RUNNING, targets.shape[0]
