@@ -1,9 +1,9 @@
 """The in-house stepper on the compiled path (:mod:`adapters.inhouse.compiled`): from one sample
 time to the next in a single compiled call, so no Python runs per step.
 
-Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk8) with
-the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method says
-``loop=python``; every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
+Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
+rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method
+says ``loop=python``; every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
 The formulation object is built as on the Python path (its rows, gains, projection cut, split and
 notes are the compiled loop's inputs), so both paths integrate the same equations with the same
 arithmetic.  Partitioning returns to Python only to choose a new split.

@@ -14,6 +14,7 @@ symplectic-euler          1      explicit one-step
 heun                      2      explicit one-step, eqs. 99–101
 rk4                       4      explicit one-step, eqs. 102–106
 rkn4                      4      Runge–Kutta–Nyström
+rk5                       5      explicit one-step, Dormand–Prince (RK45's formula)
 rk8                       8      explicit one-step, Dormand–Prince (DOP853's formula)
 ab1 … ab5                 k      Adams–Bashforth, table 2 (:mod:`.multistep`)
 am1 … am5                 k      Adams–Moulton of order k, table 3, Newton
@@ -40,7 +41,7 @@ from adapters.integrators.multistep import (
     ADAMS_MOULTON_METHODS,
     GEAR_METHODS,
 )
-from adapters.integrators.nystrom import RK4, RK8, RKN4, Euler, Heun, SymplecticEuler
+from adapters.integrators.nystrom import RK4, RK5, RK8, RKN4, Euler, Heun, SymplecticEuler
 from adapters.integrators.scipy_solvers import SCIPY_METHODS
 
 __all__ = [
@@ -52,7 +53,7 @@ __all__ = [
 #: Every method by its user-facing name.
 INTEGRATORS: dict[str, type[Integrator]] = {
     cls.name: cls
-    for cls in (Euler, SymplecticEuler, Heun, RK4, RKN4, RK8, *ADAMS_BASHFORTH_METHODS,
+    for cls in (Euler, SymplecticEuler, Heun, RK4, RKN4, RK5, RK8, *ADAMS_BASHFORTH_METHODS,
                 *ADAMS_MOULTON_METHODS, ABM4, *GEAR_METHODS, *SCIPY_METHODS)
 }
 

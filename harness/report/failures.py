@@ -51,7 +51,8 @@ REASON_LENGTH = 90
 #: explicit ones evaluate the right-hand side at known states.  LSODA switches between both.
 _INHOUSE_KIND = {
     "euler": "explicit", "symplectic-euler": "explicit", "heun": "explicit", "rk4": "explicit",
-    "rkn4": "explicit", "rk8": "explicit", "rk45": "explicit", "dop853": "explicit",
+    "rkn4": "explicit", "rk5": "explicit", "rk8": "explicit", "rk45": "explicit",
+    "dop853": "explicit",
     **{f"ab{k}": "explicit" for k in range(1, 6)},
     **{f"am{k}": "implicit" for k in range(1, 6)},
     **{f"bdf{k}": "implicit" for k in range(1, 5)},
