@@ -161,7 +161,7 @@ def test_unknown_method_lists_the_valid_ones():
     with pytest.raises(ValueError, match="valid: .*baumgarte"):
         INHOUSE.method_spec("rk4+stabilise")
     with pytest.raises(ValueError, match="valid: .*rk4"):
-        INHOUSE.method_spec("rk5+direct")
+        INHOUSE.method_spec("rk7+direct")
     with pytest.raises(ValueError, match="has no parameter"):
         INHOUSE.method_spec("rk4+direct:alpha=3")
 
