@@ -14,7 +14,10 @@ manifold they equal the seed's −A ũ̄ Ḡ form (002 table 1, eq. 28).
 
 Each function has an ``_into`` form that writes into arrays the caller owns (the compiled kernels
 reuse one scratch buffer per call instead of allocating small arrays per primitive, which was
-most of their cost) and an allocating form that wraps it.
+most of their cost) and an allocating form that wraps it.  All are inlined into their callers
+(``inline="always"``): a call of a separately compiled function with array arguments costs more
+than these few flops (its arguments' reference counts, atomic updates, are changed on entry and
+exit).
 
 All functions are numba-compiled; ``body < 0`` denotes ground (the world frame), whose points and
 vectors are constant.  Vectors are always 3-vectors (planar ones have z = 0).
@@ -29,11 +32,12 @@ PLANAR_NC = 3
 SPATIAL_NC = 7
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_into(out, q, nc, body, u):
     """out[:] = world vector A_b ū, out shape (3,)."""
     if body < 0:
-        out[0], out[1], out[2] = u[0], u[1], u[2]
+        for x in range(3):
+            out[x] = u[x]
         return
     k = body * nc
     if nc == PLANAR_NC:
@@ -50,7 +54,7 @@ def rotate_into(out, q, nc, body, u):
     out[2] = a * u[2] + 2.0 * t3 * dot + 2.0 * t0 * (t1 * u[1] - t2 * u[0])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate(q, nc, body, u):
     """World vector A_b ū, shape (3,)."""
     out = np.empty(3)
@@ -58,7 +62,7 @@ def rotate(q, nc, body, u):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_into(out, q, nc, body, u):
     """out[:] = world position r_b + A_b ū of a body point, out shape (3,)  (002 eq. 1)."""
     rotate_into(out, q, nc, body, u)
@@ -70,7 +74,7 @@ def point_into(out, q, nc, body, u):
             out[2] += q[k + 2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point(q, nc, body, u):
     """World position r_b + A_b ū of a body point, shape (3,)  (002 eq. 1)."""
     out = np.empty(3)
@@ -78,7 +82,7 @@ def point(q, nc, body, u):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_jacobian_into(jac, q, nc, body, u):
     """jac[:] = ∂(A_b ū)/∂q_b, jac shape (3, nc); translation columns are zero."""
     jac[:] = 0.0
@@ -110,7 +114,7 @@ def rotate_jacobian_into(jac, q, nc, body, u):
     jac[1, 6] += 2.0 * t0 * u[0]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_jacobian(q, nc, body, u):
     """∂(A_b ū)/∂q_b, shape (3, nc); translation columns are zero."""
     jac = np.empty((3, nc))
@@ -118,7 +122,7 @@ def rotate_jacobian(q, nc, body, u):
     return jac
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_jacobian_into(jac, q, nc, body, u):
     """jac[:] = ∂(r_b + A_b ū)/∂q_b, jac shape (3, nc)."""
     rotate_jacobian_into(jac, q, nc, body, u)
@@ -129,7 +133,7 @@ def point_jacobian_into(jac, q, nc, body, u):
             jac[2, 2] = 1.0
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_jacobian(q, nc, body, u):
     """∂(r_b + A_b ū)/∂q_b, shape (3, nc)."""
     jac = np.empty((3, nc))
@@ -137,54 +141,66 @@ def point_jacobian(q, nc, body, u):
     return jac
 
 
-@njit(cache=True)
-def _times_velocity(out, jac, v, nc, body):
-    """out[:] = jac @ q̇_b, out (3,), jac (3, nc)."""
-    k = body * nc
-    for row in range(3):
-        total = 0.0
-        for col in range(nc):
-            total += jac[row, col] * v[k + col]
-        out[row] = total
+@njit(cache=True, inline="always")
+def rotate_rate_into(out, q, v, nc, body, u):
+    """out[:] = d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b, out shape (3,), written out from the
+    Jacobian of :func:`rotate_jacobian_into` times q̇_b.
 
-
-@njit(cache=True)
-def rotate_rate_into(out, scratch, q, v, nc, body, u):
-    """out[:] = d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b; out (3,), scratch (3, nc) is overwritten."""
+    Planar: φ̇ Ω A ū.  Spatial: 4θ0θ̇0 ū + 2θ̇0 θ̄ × ū + 2(θ̄̇ (θ̄·ū) + θ̄ (θ̄̇·ū) + θ0 θ̄̇ × ū).
+    """
     if body < 0:
-        out[:] = 0.0
+        for x in range(3):
+            out[x] = 0.0
         return
-    rotate_jacobian_into(scratch, q, nc, body, u)
-    _times_velocity(out, scratch, v, nc, body)
+    k = body * nc
+    if nc == PLANAR_NC:
+        rotate_into(out, q, nc, body, u)
+        rate, along_x = v[k + 2], out[0]
+        out[0] = -rate * out[1]
+        out[1] = rate * along_x
+        out[2] = 0.0
+        return
+    t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
+    d0, d1, d2, d3 = v[k + 3], v[k + 4], v[k + 5], v[k + 6]
+    dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
+    rate_dot = d1 * u[0] + d2 * u[1] + d3 * u[2]
+    out[0] = d0 * (4.0 * t0 * u[0] + 2.0 * (t2 * u[2] - t3 * u[1])) \
+        + 2.0 * (d1 * dot + t1 * rate_dot + t0 * (d2 * u[2] - d3 * u[1]))
+    out[1] = d0 * (4.0 * t0 * u[1] + 2.0 * (t3 * u[0] - t1 * u[2])) \
+        + 2.0 * (d2 * dot + t2 * rate_dot + t0 * (d3 * u[0] - d1 * u[2]))
+    out[2] = d0 * (4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0])) \
+        + 2.0 * (d3 * dot + t3 * rate_dot + t0 * (d1 * u[1] - d2 * u[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_rate(q, v, nc, body, u):
     """d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b, shape (3,)."""
     out = np.empty(3)
-    rotate_rate_into(out, np.empty((3, nc)), q, v, nc, body, u)
+    rotate_rate_into(out, q, v, nc, body, u)
     return out
 
 
-@njit(cache=True)
-def point_rate_into(out, scratch, q, v, nc, body, u):
-    """out[:] = velocity of a body point; out (3,), scratch (3, nc) is overwritten."""
-    if body < 0:
-        out[:] = 0.0
-        return
-    point_jacobian_into(scratch, q, nc, body, u)
-    _times_velocity(out, scratch, v, nc, body)
+@njit(cache=True, inline="always")
+def point_rate_into(out, q, v, nc, body, u):
+    """out[:] = velocity ṙ_b + d(A_b ū)/dt of a body point, out shape (3,)."""
+    rotate_rate_into(out, q, v, nc, body, u)
+    if body >= 0:
+        k = body * nc
+        out[0] += v[k]
+        out[1] += v[k + 1]
+        if nc == SPATIAL_NC:
+            out[2] += v[k + 2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def point_rate(q, v, nc, body, u):
     """Velocity of a body point, shape (3,)."""
     out = np.empty(3)
-    point_rate_into(out, np.empty((3, nc)), q, v, nc, body, u)
+    point_rate_into(out, q, v, nc, body, u)
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_quadratic_into(out, q, v, nc, body, u):
     """out[:] = the part of d²(A_b ū)/dt² without q̈, out shape (3,).
 
@@ -209,7 +225,7 @@ def rotate_quadratic_into(out, q, v, nc, body, u):
     out[2] = 4.0 * (d0 * d0 * u[2] + d3 * dot + d0 * (d1 * u[1] - d2 * u[0]))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def rotate_quadratic(q, v, nc, body, u):
     """The part of d²(A_b ū)/dt² without q̈, shape (3,) (see :func:`rotate_quadratic_into`)."""
     out = np.empty(3)

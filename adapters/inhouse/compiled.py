@@ -51,9 +51,18 @@ def _max_abs(values):
 
 
 @njit(cache=True)
+def _kept_rows(values, rows):
+    """``values[rows]`` (contiguous) of Φ (m,) or Φ_q (m, n); ``values`` itself, no copy, when
+    every row is kept (``rows`` is then 0 … m − 1)."""
+    if rows.shape[0] == values.shape[0]:
+        return values
+    return np.ascontiguousarray(values[rows])
+
+
+@njit(cache=True)
 def _rows_jacobian(q, t, rows, constraint_args, counters):
     counters[JACOBIAN_EVALS] += 1
-    return np.ascontiguousarray(kernels.jacobian(q, t, *constraint_args)[rows])
+    return _kept_rows(kernels.jacobian(q, t, *constraint_args), rows)
 
 
 @njit(cache=True)
@@ -64,7 +73,7 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     when an iteration no longer reduces max |Φ|)."""
     previous = np.inf
     for _ in range(proj_max_iter):
-        residual = kernels.phi(q, t, *constraint_args)[rows]
+        residual = _kept_rows(kernels.phi(q, t, *constraint_args), rows)
         size = _max_abs(residual)
         if size < proj_tol or not size < previous:
             break
@@ -100,7 +109,7 @@ def expand(q_ind, v_ind, t, rows, constraint_args, partition, counters):
     converged = False
     residual = np.zeros(0)
     for _ in range(max_iter):
-        residual = kernels.phi(q, t, *constraint_args)[rows]
+        residual = _kept_rows(kernels.phi(q, t, *constraint_args), rows)
         if _max_abs(residual) < tol:
             converged = True
             break

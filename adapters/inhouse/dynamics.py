@@ -26,11 +26,12 @@ from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_
                                      pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import certified_spd_solve, truncated_solve
+from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, sparse_left_product,
+                                     truncated_solve, weighted_gram)
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def g_bar(theta):
     """Ḡ = 2Ē of 002 eq. 28, shape (3, 4)."""
     t0, t1, t2, t3 = theta[0], theta[1], theta[2], theta[3]
@@ -148,10 +149,11 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
         _euler_block_solve(solved[k + 3:k + 7], rhs[k + 3:k + 7], q[k + 3:k + 7],
                            _inverse_3x3(inertias[b]), 4.0 * np.trace(inertias[b]) / 3.0)
     columns, free = np.ascontiguousarray(solved[:, :m]), np.ascontiguousarray(solved[:, m])
-    certified, mu = certified_spd_solve(jac @ columns, target - jac @ free, cut)
+    certified, mu = certified_spd_solve(sparse_left_product(jac, columns),
+                                        target - matvec(jac, free), cut)
     if not certified:
         return False, np.empty(0)
-    return True, free + columns @ mu
+    return True, free + matvec(columns, mu)
 
 
 @njit(cache=True)
@@ -185,6 +187,7 @@ def planar_mass_diagonal(masses, inertias):
 def _inertial_forces(q, v, nc, masses, gravity, inertias):
     """Q_v + gravity, shape (n,) (002 eq. 62–63)."""
     force = np.zeros(q.shape[0])
+    omega, spin, gyroscopic = np.empty(3), np.empty(3), np.empty(3)
     for b in range(masses.shape[0]):
         k = b * nc
         for a in range(3 if nc != PLANAR_NC else 2):
@@ -192,19 +195,26 @@ def _inertial_forces(q, v, nc, masses, gravity, inertias):
         if nc == PLANAR_NC:
             continue
         g = g_bar(q[k + 3:k + 7])
-        omega = np.empty(3)
         for r in range(3):
             omega[r] = g[r, 0] * v[k + 3] + g[r, 1] * v[k + 4] + g[r, 2] * v[k + 5] \
                 + g[r, 3] * v[k + 6]
-        spin = inertias[b] @ omega
-        gyroscopic = np.array([omega[1] * spin[2] - omega[2] * spin[1],
-                               omega[2] * spin[0] - omega[0] * spin[2],
-                               omega[0] * spin[1] - omega[1] * spin[0]])
+        for r in range(3):
+            spin[r] = inertias[b, r, 0] * omega[0] + inertias[b, r, 1] * omega[1] \
+                + inertias[b, r, 2] * omega[2]
+        _cross_into(gyroscopic, omega, spin)
         _add_g_bar_transpose(force, k + 3, g, gyroscopic, -1.0)
     return force
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _cross_into(out, a, b):
+    """out[:] = a × b, all (3,)."""
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True, inline="always")
 def _add_g_bar_transpose(out, start, g, vector, sign):
     """out[start:start + 4] += sign · Ḡᵀ vector, g = Ḡ (3, 4), vector (3,)."""
     for c in range(4):
@@ -212,7 +222,7 @@ def _add_g_bar_transpose(out, start, g, vector, sign):
                                   + g[2, c] * vector[2])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_point_force(out, q, nc, body, u, f):
     """Add the generalised force of world force f at body point ū."""
     if body < 0:
@@ -225,17 +235,17 @@ def _add_point_force(out, q, nc, body, u, f):
         out[k + 2] += arm[0] * f[1] - arm[1] * f[0]
         return
     out[k:k + 3] += f
-    _add_torque(out, q, nc, body, np.cross(arm, f))
+    _add_torque(out, q, nc, body, np.cross(arm, f), 1.0)
 
 
-@njit(cache=True)
-def _add_torque(out, q, nc, body, n):
-    """Add the generalised force of world torque n on a body."""
+@njit(cache=True, inline="always")
+def _add_torque(out, q, nc, body, n, sign):
+    """Add the generalised force of world torque sign · n (sign = ±1) on a body."""
     if body < 0:
         return
     k = body * nc
     if nc == PLANAR_NC:
-        out[k + 2] += n[2]
+        out[k + 2] += sign * n[2]
         return
     # Ḡᵀ Aᵀ n: Aᵀ n = (2e₀² − 1) n + 2e (eᵀn) − 2e₀ (e × n) is the torque in body axes
     # (002 eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
@@ -245,7 +255,7 @@ def _add_torque(out, q, nc, body, n):
     local = np.array([scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
                       scale * n[1] + along * e2 - 2.0 * e0 * (e3 * n[0] - e1 * n[2]),
                       scale * n[2] + along * e3 - 2.0 * e0 * (e1 * n[1] - e2 * n[0])])
-    _add_g_bar_transpose(out, k + 3, g_bar(theta), local, 1.0)
+    _add_g_bar_transpose(out, k + 3, g_bar(theta), local, sign)
 
 
 F_JOINT_TORQUE, F_JOINT_FORCE, F_POINT, F_TORQUE, F_SPRING = range(5)
@@ -257,9 +267,10 @@ def _applied_forces(out, q, v, nc, kind, bi, bj, va, vb, vc, scalars):
     for k in range(kind.shape[0]):
         i, j, kd = bi[k], bj[k], kind[k]
         if kd == F_JOINT_TORQUE:  # τ about the joint axis on body j, −τ on body i
-            n = scalars[k, 0] * rotate(q, nc, i, va[k])
-            _add_torque(out, q, nc, j, n)
-            _add_torque(out, q, nc, i, -n)
+            n = rotate(q, nc, i, va[k])
+            n *= scalars[k, 0]
+            _add_torque(out, q, nc, j, n, 1.0)
+            _add_torque(out, q, nc, i, n, -1.0)
         elif kd == F_JOINT_FORCE:  # f along the axis at the joint points
             f = scalars[k, 0] * rotate(q, nc, i, va[k])
             _add_point_force(out, q, nc, j, vc[k], f)
@@ -267,7 +278,7 @@ def _applied_forces(out, q, v, nc, kind, bi, bj, va, vb, vc, scalars):
         elif kd == F_POINT:
             _add_point_force(out, q, nc, i, vb[k], va[k])
         elif kd == F_TORQUE:
-            _add_torque(out, q, nc, i, va[k])
+            _add_torque(out, q, nc, i, va[k], 1.0)
         else:  # F_SPRING: tension k(L − L0) + c L̇ pulls the points together
             d = point(q, nc, j, vc[k]) - point(q, nc, i, vb[k])
             length = np.sqrt(d @ d)
@@ -419,11 +430,10 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
         # Planar bodies: M⁻¹ is exact and cheap; S = Φ_q M⁻¹ Φ_qᵀ.  When S is certified far from
         # the cut the solution is the same as the M̃ form's (unique; to round-off).
         inverse = 1.0 / np.diag(mass)
-        weighted = jacobian * inverse
-        certified, mu = certified_spd_solve(weighted @ jacobian.T,
-                                            gamma - weighted @ force, cut)
+        certified, mu = certified_spd_solve(weighted_gram(jacobian, inverse),
+                                            gamma - matvec(jacobian, inverse * force), cut)
         if certified:
-            return inverse * (force + jacobian.T @ mu)
+            return inverse * (force + rmatvec(jacobian, mu))
     scale = np.sum(jacobian * jacobian)
     rho = np.trace(mass) / scale if scale > 0.0 else 0.0
     augmented = mass + rho * (jacobian.T @ jacobian)

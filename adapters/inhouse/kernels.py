@@ -21,6 +21,10 @@ right-hand side Φ_q q̈ = γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt (00
 Arrays (k primitives): ``kind, bi, bj, row, driver`` int64 (k,); ``ui, uj, pi, gj`` float64 (k, 3)
 (vectors or points on body i / j, the second point on i for DOT_VD, the second vector on j for
 DRIVE_ROT); ``const`` float64 (k,).
+
+The small helpers below are inlined into the kernels (``inline="always"``), as those of
+:mod:`adapters.inhouse.bodykin` are, and for the same reason: a call of a separately compiled
+function with array arguments costs more than their arithmetic.
 """
 
 from __future__ import annotations
@@ -43,18 +47,18 @@ from adapters.inhouse.bodykin import (
 POINT, DOT_VV, DOT_VD, ANGLE, NORM, DRIVE_ROT = range(6)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _drive(drive, t):
     """θ_d, θ̇_d at time t for ``drive = (value, rate)`` (linear in t, so θ̈_d = 0)."""
     return drive[0] + drive[1] * t, drive[1]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _rot_target_rate(k, tab_uj, tab_gj, theta, rate):
     return rate * (np.cos(theta) * tab_uj[k] - np.sin(theta) * tab_gj[k])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_block(jac, r, q, nc, body, block_row, sign=1.0):
     if body >= 0:
         k = body * nc
@@ -93,17 +97,23 @@ def phi(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
             phi_i = q[i * nc + 2] if i >= 0 else 0.0
             out[r] = phi_j - phi_i - const[k] - driver[k] * theta
         else:  # NORM
-            s = q[i * nc + 3:i * nc + 7]
-            out[r] = s @ s - 1.0
+            out[r] = _euler_square(q, i * nc + 3) - 1.0
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
+def _euler_square(x, start):
+    """x[start:start + 4] · x[start:start + 4] (θᵀθ or θ̇ᵀθ̇ of one body) without a BLAS call."""
+    return x[start] * x[start] + x[start + 1] * x[start + 1] + x[start + 2] * x[start + 2] \
+        + x[start + 3] * x[start + 3]
+
+
+@njit(cache=True, inline="always")
 def _dot(a, b):
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _second_vector_into(out, k, kind, tab_uj, tab_gj, theta):
     """The vector on body j of a DOT_VV row (ū_j) or of a DRIVE_ROT row (sin θ_d f̄_j +
     cos θ_d ḡ_j), written into ``out`` (3,)."""
@@ -115,7 +125,7 @@ def _second_vector_into(out, k, kind, tab_uj, tab_gj, theta):
         out[x] = s * tab_uj[k, x] + c * tab_gj[k, x]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _add_vector_times_jacobian(jac, r, nc, body, vector, block, sign):
     """jac[r, body block] += sign · vectorᵀ block, block (3, nc)."""
     if body < 0:
@@ -170,7 +180,8 @@ def jacobian(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
             if i >= 0:
                 jac[r, i * nc + 2] -= 1.0
         else:  # NORM
-            jac[r, i * nc + 3:i * nc + 7] = 2.0 * q[i * nc + 3:i * nc + 7]
+            for c in range(i * nc + 3, i * nc + 7):
+                jac[r, c] = 2.0 * q[c]
     return jac
 
 
@@ -195,7 +206,6 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3
     theta, rate = _drive(drive, t)
-    scratch = np.empty((3, nc))
     a_i, a_j, da_i, da_j = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     qa_i, qa_j, w, w_dot = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
@@ -210,8 +220,8 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
             _second_vector_into(w, k, kd, uj, gj, theta)
             rotate_into(a_i, q, nc, i, ui[k])
             rotate_into(a_j, q, nc, j, w)
-            rotate_rate_into(da_i, scratch, q, v, nc, i, ui[k])
-            rotate_rate_into(da_j, scratch, q, v, nc, j, w)
+            rotate_rate_into(da_i, q, v, nc, i, ui[k])
+            rotate_rate_into(da_j, q, v, nc, j, w)
             rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
             rotate_quadratic_into(qa_j, q, v, nc, j, w)
             acc = _dot(qa_i, a_j) + 2.0 * _dot(da_i, da_j) + _dot(a_i, qa_j)
@@ -221,7 +231,7 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
                 for x in range(3):
                     w_dot[x] = rate * (c * uj[k, x] - s * gj[k, x])
                 rotate_into(qa_j, q, nc, j, w_dot)
-                rotate_rate_into(da_j, scratch, q, v, nc, j, w_dot)
+                rotate_rate_into(da_j, q, v, nc, j, w_dot)
                 acc += 2.0 * (_dot(da_i, qa_j) + _dot(a_i, da_j))
                 acc -= rate * rate * _dot(a_i, a_j)
             out[r] = -acc
@@ -229,19 +239,18 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
             rotate_into(a_i, q, nc, i, ui[k])
             point_into(a_j, q, nc, j, uj[k])
             point_into(w, q, nc, i, pi[k])
-            point_rate_into(da_j, scratch, q, v, nc, j, uj[k])
-            point_rate_into(w_dot, scratch, q, v, nc, i, pi[k])
+            point_rate_into(da_j, q, v, nc, j, uj[k])
+            point_rate_into(w_dot, q, v, nc, i, pi[k])
             rotate_quadratic_into(qa_j, q, v, nc, j, uj[k])
             rotate_quadratic_into(qa_i, q, v, nc, i, pi[k])
             total = 0.0
             for x in range(3):
                 total += a_i[x] * (qa_j[x] - qa_i[x])
             rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
-            rotate_rate_into(da_i, scratch, q, v, nc, i, ui[k])
+            rotate_rate_into(da_i, q, v, nc, i, ui[k])
             for x in range(3):
                 total += qa_i[x] * (a_j[x] - w[x]) + 2.0 * da_i[x] * (da_j[x] - w_dot[x])
             out[r] = -total
         elif kd == NORM:
-            s = v[i * nc + 3:i * nc + 7]
-            out[r] = -2.0 * (s @ s)
+            out[r] = -2.0 * _euler_square(v, i * nc + 3)
     return out

@@ -1,7 +1,9 @@
 """Small dense solves compiled with numba: at these sizes (n ≤ ~50) SciPy's wrappers cost more than
-the LAPACK call itself.  Always a factorisation (LAPACK gesv, potrf or gesdd), never an explicit
-inverse; the triangular substitutions after a Cholesky factorisation are written out because numba
-offers no triangular solve."""
+the LAPACK call itself, and for the range-space matrices of the right-hand side and the projection
+(a few to a few tens of rows) numba's own BLAS/LAPACK calls cost more than the arithmetic, so the
+Cholesky factorisation, its substitutions and the products with the constraint Jacobian are plain
+loops here.  Always a factorisation (LAPACK gesv or gesdd, or the Cholesky factor), never an
+explicit inverse."""
 
 from __future__ import annotations
 
@@ -43,25 +45,50 @@ CERTIFICATE_MARGIN = 10.0
 
 
 @njit(cache=True)
-def _forward(lower, rhs):
-    """y with lower @ y = rhs (forward substitution), lower (k, k) lower triangular."""
-    k = rhs.shape[0]
-    y = np.empty(k)
-    for i in range(k):
-        s = rhs[i]
-        for j in range(i):
-            s -= lower[i, j] * y[j]
-        y[i] = s / lower[i, i]
-    return y
+def _cholesky(matrix):
+    """Lower-triangular L with L Lᵀ = matrix (k, k) from its lower triangle (the triangle LAPACK
+    potrf reads through numpy's ``cholesky``), column by column.
+
+    Returns
+    -------
+    positive : bool
+        False at the first pivot that is not positive: potrf's rule for "not positive definite"
+        (a NaN pivot too, which OpenBLAS's potrf lets through; :func:`certified_spd_solve`
+        refused such a matrix by its NaN bound before, so its decision is unchanged); L is then
+        incomplete.
+    lower : ndarray, shape (k, k)
+    """
+    k = matrix.shape[0]
+    lower = np.zeros((k, k))
+    for j in range(k):
+        pivot = matrix[j, j]
+        for p in range(j):
+            pivot -= lower[j, p] * lower[j, p]
+        if not pivot > 0.0:
+            return False, lower
+        diagonal = np.sqrt(pivot)
+        lower[j, j] = diagonal
+        for i in range(j + 1, k):
+            s = matrix[i, j]
+            for p in range(j):
+                s -= lower[i, p] * lower[j, p]
+            lower[i, j] = s / diagonal
+    return True, lower
 
 
 @njit(cache=True)
-def _backward_transposed(lower, rhs):
-    """x with lowerᵀ @ x = rhs (back substitution)."""
+def _cholesky_solve(lower, rhs):
+    """x with lower @ lowerᵀ @ x = rhs, lower (k, k) lower triangular: forward then back
+    substitution in one array (numba offers no triangular solve)."""
     k = rhs.shape[0]
     x = np.empty(k)
-    for i in range(k - 1, -1, -1):
+    for i in range(k):
         s = rhs[i]
+        for j in range(i):
+            s -= lower[i, j] * x[j]
+        x[i] = s / lower[i, i]
+    for i in range(k - 1, -1, -1):
+        s = x[i]
         for j in range(i + 1, k):
             s -= lower[j, i] * x[j]
         x[i] = s / lower[i, i]
@@ -70,21 +97,32 @@ def _backward_transposed(lower, rhs):
 
 @njit(cache=True)
 def _inverse_frobenius_squared(lower):
-    """‖L⁻¹‖_F² of a lower-triangular L (k, k), column by column of L⁻¹ (forward substitution)."""
+    """‖L⁻¹‖_F² of a lower-triangular L (k, k), row by row of L⁻¹: row i is
+    (e_iᵀ − Σ_{j<i} L_ij row_j) / L_ii, each row a sum of earlier rows (contiguous, independent
+    entries) rather than a chain of dependent dot products."""
     k = lower.shape[0]
+    inverse = np.zeros((k, k))
     total = 0.0
-    column = np.empty(k)
-    for c in range(k):
-        for i in range(k):
-            if i < c:
-                column[i] = 0.0
-                continue
-            s = 1.0 if i == c else 0.0
-            for j in range(c, i):
-                s -= lower[i, j] * column[j]
-            column[i] = s / lower[i, i]
-            total += column[i] * column[i]
+    for i in range(k):
+        inverse[i, i] = 1.0
+        for j in range(i):
+            factor = lower[i, j]
+            for c in range(j + 1):
+                inverse[i, c] -= factor * inverse[j, c]
+        for c in range(i + 1):
+            inverse[i, c] /= lower[i, i]
+            total += inverse[i, c] * inverse[i, c]
     return total
+
+
+@njit(cache=True)
+def _frobenius(matrix):
+    """‖matrix‖_F of a 2-D array."""
+    total = 0.0
+    for i in range(matrix.shape[0]):
+        for j in range(matrix.shape[1]):
+            total += matrix[i, j] * matrix[i, j]
+    return np.sqrt(total)
 
 
 @njit(cache=True)
@@ -95,7 +133,8 @@ def certified_spd_solve(matrix, rhs, cut):
     Certificate: κ₂(S) = ‖S‖₂ ‖S⁻¹‖₂ ≤ ‖S‖_F ‖L⁻¹‖_F² with S = LLᵀ.  Below that bound no singular
     value falls under ``cut`` × the largest, so :func:`truncated_solve` at ``cut`` would keep every
     direction and return the same solution (to round-off); the Cholesky solve costs a fraction of
-    the SVD.
+    the SVD.  The factorisation is written out (:func:`_cholesky`): at these sizes a LAPACK call
+    costs more than the arithmetic.
 
     Returns
     -------
@@ -106,14 +145,71 @@ def certified_spd_solve(matrix, rhs, cut):
     k = rhs.shape[0]
     if k == 0:
         return True, np.empty(0)
-    try:
-        lower = np.linalg.cholesky(matrix)
-    except Exception:  # noqa: BLE001 — not positive definite: no certificate
+    positive, lower = _cholesky(matrix)
+    if not positive:  # not positive definite: no certificate
         return False, np.empty(0)
-    bound = np.sqrt(np.sum(matrix * matrix)) * _inverse_frobenius_squared(lower)
+    bound = _frobenius(matrix) * _inverse_frobenius_squared(lower)
     if not bound * CERTIFICATE_MARGIN * cut < 1.0:
         return False, np.empty(0)
-    return True, _backward_transposed(lower, _forward(lower, rhs))
+    return True, _cholesky_solve(lower, rhs)
+
+
+@njit(cache=True)
+def weighted_gram(matrix, weights):
+    """A W Aᵀ for A = ``matrix`` (m, n) and W = diag(``weights``) (n,), shape (m, m), exactly
+    symmetric (the lower triangle is accumulated and mirrored).  Plain loops, no BLAS call; the
+    zero entries of each row of A (a constraint row touches at most two bodies) are skipped."""
+    m, n = matrix.shape
+    gram = np.zeros((m, m))
+    for i in range(m):
+        for c in range(n):
+            if matrix[i, c] == 0.0:
+                continue
+            scaled = matrix[i, c] * weights[c]
+            for j in range(i + 1):
+                gram[i, j] += scaled * matrix[j, c]
+        for j in range(i):
+            gram[j, i] = gram[i, j]
+    return gram
+
+
+@njit(cache=True)
+def sparse_left_product(left, right):
+    """left @ right, left (m, k), right (k, r), shape (m, r); plain loops, no BLAS call, the zero
+    entries of ``left`` (a constraint Jacobian's) skipped."""
+    m, k = left.shape
+    out = np.zeros((m, right.shape[1]))
+    for i in range(m):
+        for c in range(k):
+            if left[i, c] == 0.0:
+                continue
+            for j in range(right.shape[1]):
+                out[i, j] += left[i, c] * right[c, j]
+    return out
+
+
+@njit(cache=True)
+def matvec(matrix, x):
+    """matrix @ x, matrix (m, n), x (n,), shape (m,); plain loops, no BLAS call."""
+    m, n = matrix.shape
+    out = np.empty(m)
+    for i in range(m):
+        total = 0.0
+        for c in range(n):
+            total += matrix[i, c] * x[c]
+        out[i] = total
+    return out
+
+
+@njit(cache=True)
+def rmatvec(matrix, y):
+    """matrixᵀ @ y, matrix (m, n), y (m,), shape (n,); plain loops, no BLAS call."""
+    m, n = matrix.shape
+    out = np.zeros(n)
+    for i in range(m):
+        for c in range(n):
+            out[c] += matrix[i, c] * y[i]
+    return out
 
 
 @njit(cache=True)
@@ -121,7 +217,8 @@ def min_norm_solve(matrix, rhs, cut):
     """:func:`truncated_solve` of a wide matrix (m, n), m ≤ n, rhs (m,), by the normal equations
     x = Aᵀ(AAᵀ)⁻¹ rhs when :func:`certified_spd_solve` certifies AAᵀ at cut² (σ(AAᵀ) = σ(A)²), else
     by the truncated SVD itself."""
-    certified, y = certified_spd_solve(matrix @ matrix.T, rhs, cut * cut)
+    certified, y = certified_spd_solve(weighted_gram(matrix, np.ones(matrix.shape[1])), rhs,
+                                       cut * cut)
     if certified:
-        return matrix.T @ y
+        return rmatvec(matrix, y)
     return truncated_solve(matrix, rhs, cut)
