@@ -63,15 +63,22 @@ def rotate(q, nc, body, u):
 
 
 @njit(cache=True, inline="always")
+def _add_origin(out, coordinates, nc, body):
+    """out[:] += the body's origin entries of ``coordinates`` (r_b of q, or ṙ_b of q̇); nothing
+    for the ground (body < 0)."""
+    if body >= 0:
+        k = body * nc
+        out[0] += coordinates[k]
+        out[1] += coordinates[k + 1]
+        if nc == SPATIAL_NC:
+            out[2] += coordinates[k + 2]
+
+
+@njit(cache=True, inline="always")
 def point_into(out, q, nc, body, u):
     """out[:] = world position r_b + A_b ū of a body point, out shape (3,)  (002 eq. 1)."""
     rotate_into(out, q, nc, body, u)
-    if body >= 0:
-        k = body * nc
-        out[0] += q[k]
-        out[1] += q[k + 1]
-        if nc == SPATIAL_NC:
-            out[2] += q[k + 2]
+    _add_origin(out, q, nc, body)
 
 
 @njit(cache=True, inline="always")
@@ -184,12 +191,7 @@ def rotate_rate(q, v, nc, body, u):
 def point_rate_into(out, q, v, nc, body, u):
     """out[:] = velocity ṙ_b + d(A_b ū)/dt of a body point, out shape (3,)."""
     rotate_rate_into(out, q, v, nc, body, u)
-    if body >= 0:
-        k = body * nc
-        out[0] += v[k]
-        out[1] += v[k + 1]
-        if nc == SPATIAL_NC:
-            out[2] += v[k + 2]
+    _add_origin(out, v, nc, body)
 
 
 @njit(cache=True, inline="always")
