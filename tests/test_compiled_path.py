@@ -64,6 +64,19 @@ def test_a_divergence_is_reported_alike_on_both_paths():
     np.testing.assert_array_equal(runs[0].times, runs[1].times)
 
 
+def test_a_divergence_between_samples_keeps_its_step_time_on_both_paths():
+    """Ten steps per sample: measured, both paths diverge in step 39 (t = 0.039 s), keep the
+    samples up to 0.03 s and name 0.038 s, the last good step, as the failure time; the compiled
+    path found it inside its one call through every sample."""
+    mech = scenario.load("fourbar")
+    runs = [get_adapter("inhouse").simulate(
+        mech, f"euler+baumgarte:alpha=3000,beta=3000,loop={loop}", 1e-3, 2.0,
+        sample_times(1e-3, 2.0)) for loop in ("python", "compiled")]
+    assert {(r.status, r.failure_time, r.steps, r.n_samples) for r in runs} == \
+        {("diverged", 0.038, 38, 4)}
+    assert np.abs(runs[0].position - runs[1].position).max() <= PATH_BOUND
+
+
 def test_a_whole_run_in_one_call_hands_out_each_sample_and_refuses_to_go_back():
     # The first _step_to integrates through every sample (compiled.run_samples); the states it
     # hands out are those of stepping sample by sample (same calls, so equal to the bit).
