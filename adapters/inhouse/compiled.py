@@ -148,27 +148,35 @@ def _acceleration(q, v, t, model, partition, stabilisation, counters):
 
 @njit(cache=True)
 def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters):
-    """One step of :func:`adapters.integrators.nystrom.nystrom_step` (same operation order)."""
+    """One step of :func:`adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
+    operation order (so to the same bits), without a temporary array per tableau coefficient."""
     c, a, abar, b, bbar = tableau
     stages = np.empty((c.shape[0], v.shape[0]))
+    q_stage, v_stage = np.empty(q.shape[0]), np.empty(v.shape[0])
     for i in range(c.shape[0]):
-        dq = (c[i] * h) * v
-        v_stage = v
-        for j in range(i):
-            if abar[i, j] != 0.0:
-                dq = dq + (h * h * abar[i, j]) * stages[j]
-            if a[i, j] != 0.0:
-                v_stage = v_stage + (h * a[i, j]) * stages[j]
-        stages[i] = _acceleration(q + dq, v_stage, t + c[i] * h, model, partition,
+        _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
+        stages[i] = _acceleration(q_stage, v_stage, t + c[i] * h, model, partition,
                                   stabilisation, counters)
-    dq = h * v
-    v_new = v
-    for j in range(c.shape[0]):
-        if bbar[j] != 0.0:
-            dq = dq + (h * h * bbar[j]) * stages[j]
-        if b[j] != 0.0:
-            v_new = v_new + (h * b[j]) * stages[j]
-    return q + dq, v_new
+    q_new, v_new = np.empty(q.shape[0]), np.empty(v.shape[0])
+    _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
+    return q_new, v_new
+
+
+@njit(cache=True)
+def _combine(q_out, v_out, q, v, stages, velocity_weight, h2, position_weights, h,
+             velocity_weights):
+    """q_out = q + (velocity_weight·v + Σ_j (h2·w̄_j)·k_j), v_out = v + Σ_j (h·w_j)·k_j over
+    the stages k_j with a non-zero weight, summed in order j = 0, 1, … (a stage or update line of
+    the Nyström tableau); all vectors (n,), ``stages`` (s, n), the weights (j,)."""
+    for e in range(v.shape[0]):
+        dq, ve = velocity_weight * v[e], v[e]
+        for j in range(position_weights.shape[0]):
+            if position_weights[j] != 0.0:
+                dq = dq + (h2 * position_weights[j]) * stages[j, e]
+            if velocity_weights[j] != 0.0:
+                ve = ve + (h * velocity_weights[j]) * stages[j, e]
+        q_out[e] = q[e] + dq
+        v_out[e] = ve
 
 
 @njit(cache=True)
