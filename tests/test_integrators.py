@@ -18,6 +18,7 @@ from adapters.integrators import (
     is_adaptive,
     make_integrator,
 )
+from adapters.integrators.nystrom import step_rule
 
 T_END = 2.0
 Q0 = np.array([1.0])
@@ -223,6 +224,21 @@ def test_a_collapsing_adaptive_step_stops_the_run_at_once(name):
     # it; the run stops there instead of crawling on.
     assert 0.99 < integrator.failure_time < 1.0
     assert integrator.n_steps < 5000
+
+
+@pytest.mark.parametrize("problem", [DampedPendulum(), NaNAfter(), RaisesAfter()],
+                         ids=["running", "non-finite", "raising"])
+@pytest.mark.parametrize("name", EXPLICIT_ONE_STEP)
+def test_unchecked_steps_are_the_checked_ones_and_replay_a_failure(name, problem):
+    # Same rule, same arithmetic: equal to the bit; a failing step is replayed by step().
+    checked = run_steps(make_integrator(name, problem, 0.0, Q0, V0, 0.1), 10)
+    unchecked = make_integrator(name, problem, 0.0, Q0, V0, 0.1)
+    rule = step_rule(type(unchecked), problem, problem.acceleration)
+    assert unchecked.steps_unchecked(10, rule) == checked.status
+    for key in ("t", "n_steps", "nfev", "failure_reason", "failure_time"):
+        assert getattr(unchecked, key) == getattr(checked, key), key
+    np.testing.assert_array_equal(unchecked.q, checked.q)
+    np.testing.assert_array_equal(unchecked.v, checked.v)
 
 
 def test_newton_that_cannot_converge_is_a_failure():

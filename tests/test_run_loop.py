@@ -90,7 +90,19 @@ def _raise_on_step(monkeypatch, name):
         if taken["steps"] >= FAILING_STEP:
             raise RuntimeError("injected")
 
-    if name in ("inhouse", "pinocchio"):
+    if name == "pinocchio":  # steps unchecked between samples: the engine call raises
+        from adapters.pinocchio_adapter.dynamics import ConstrainedProblem
+        engine_acceleration = ConstrainedProblem.engine_acceleration
+        calls = {"n": 0}
+
+        def failing_acceleration(self, t, q, v):
+            calls["n"] += 1  # RK4: four calls a step
+            if calls["n"] > 4 * (FAILING_STEP - 1):
+                raise RuntimeError("injected")
+            return engine_acceleration(self, t, q, v)
+
+        monkeypatch.setattr(ConstrainedProblem, "engine_acceleration", failing_acceleration)
+    elif name == "inhouse":
         step = Integrator.step
 
         def failing_step(self):
@@ -143,7 +155,9 @@ def test_engine_exception_keeps_the_samples_before_it(built, monkeypatch, name):
     method = "rk4+baumgarte:loop=python" if name == "inhouse" else RUNNING_METHOD[name]
     trajectory = adapter.simulate(model, method, DT, T_END, EVERY_STEP)
     assert trajectory.status == "failed"
-    assert "RuntimeError" in trajectory.reason and "injected" in trajectory.reason
+    # Pinocchio's problem words an exception of pin.constraintDynamics as a StepFailure.
+    raised = "pin.constraintDynamics raised" if name == "pinocchio" else "RuntimeError"
+    assert raised in trajectory.reason and "injected" in trajectory.reason
     np.testing.assert_allclose(trajectory.times, EVERY_STEP[:FAILING_STEP], rtol=0, atol=1e-15)
     assert trajectory.failure_time == pytest.approx((FAILING_STEP - 1) * DT, rel=1e-12)
     assert np.all(np.isfinite(trajectory.position))

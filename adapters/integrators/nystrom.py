@@ -50,7 +50,7 @@ from functools import partial
 import numpy as np
 from scipy.integrate import DOP853, RK45
 
-from adapters.integrators.base import Integrator
+from adapters.integrators.base import RUNNING, Integrator
 
 
 @dataclass(frozen=True)
@@ -233,6 +233,42 @@ class NystromIntegrator(Integrator):
         t_new = self._target_time()
         q_new, v_new = self._rule(self.t, self.q, self.v, t_new - self.t, self.tableau)
         return t_new, q_new, v_new
+
+    def steps_unchecked(self, count: int, rule) -> str:
+        """Up to ``count`` steps by ``rule``, a step rule of this method (:func:`step_rule`) over a
+        right-hand side without the problem's own per-call checks, each new state checked as
+        :meth:`step` checks it.  A step that raises (anything) or whose state fails the check is
+        taken again by :meth:`step`, which fails it with its reason or lets a non-problem error
+        through, as it does (the step's evaluations are then made twice).
+        The same arithmetic as ``count`` calls of :meth:`step` when ``rule``'s right-hand side
+        returns the problem's accelerations; ``nfev`` counts one evaluation per stage.
+
+        Returns
+        -------
+        status : str
+            The status after the last step.
+        """
+        if self.status != RUNNING:
+            return self.status
+        limit = self.params["divergence_limit"] ** 2
+        project, tableau, stages = self.problem.project, self.tableau, self.tableau.c.size
+        for _ in range(count):
+            t_new = self._target_time()
+            try:
+                q_new, v_new = project(t_new, *rule(self.t, self.q, self.v, t_new - self.t,
+                                                    tableau))
+                q_new, v_new = np.asarray(q_new, dtype=float), np.asarray(v_new, dtype=float)
+                good = float(q_new.dot(q_new)) <= limit and float(v_new.dot(v_new)) <= limit
+            except Exception:  # noqa: BLE001 — replayed by step(), which words or re-raises it
+                good = False
+            if not good:  # NaN fails the comparisons too
+                if self.step() != RUNNING:
+                    return self.status
+                continue
+            self.t, self.q, self.v = t_new, q_new, v_new
+            self.n_steps += 1
+            self.nfev += stages
+        return self.status
 
 
 class Euler(NystromIntegrator):

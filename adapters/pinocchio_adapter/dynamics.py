@@ -141,19 +141,28 @@ class ConstrainedProblem:
             If Pinocchio raises.
         """
         try:
-            a = self.engine_acceleration(t, q, v)
+            a = self.counted_acceleration(t, q, v)
         except RuntimeError as exc:
             raise StepFailure(f"pin.constraintDynamics raised: {exc}") from exc
-        counters, prox = self.counters, self.prox
-        counters["constraint_dynamics_calls"] += 1
-        counters["proximal_iterations"] += prox.iter
-        if prox.relative_residual > counters["max_relative_residual"]:
-            counters["max_relative_residual"] = prox.relative_residual
         if not math.isfinite(a.sum()):  # NaN or ±inf anywhere makes the sum non-finite
             raise FloatingPointError(
                 f"pin.constraintDynamics returned a non-finite acceleration at t = {t:.6g} s "
                 f"(proximal mu = {self.prox.mu:g}, {self.prox.iter} of {self.prox.max_iter} "
                 f"iteration(s), relative residual {self.prox.relative_residual:.3g})")
+        return a
+
+    def counted_acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """:meth:`engine_acceleration` with the cost counters (calls, proximal iterations, the
+        largest relative residual) and no checks, shape (nv,): the right-hand side of the
+        adapter's unchecked steps (:meth:`~adapters.integrators.nystrom.NystromIntegrator.
+        steps_unchecked`), whose failing steps :meth:`acceleration` takes again."""
+        a = self.engine_acceleration(t, q, v)
+        counters, prox = self.counters, self.prox
+        counters["constraint_dynamics_calls"] += 1
+        counters["proximal_iterations"] += prox.iter
+        residual = prox.relative_residual
+        if residual > counters["max_relative_residual"]:
+            counters["max_relative_residual"] = residual
         return a
 
     def engine_acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
