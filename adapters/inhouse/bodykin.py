@@ -14,7 +14,8 @@ manifold they equal the seed's −A ũ̄ Ḡ form (002 table 1, eq. 28).
 
 Each function has an ``_into`` form that writes into arrays the caller owns (the compiled kernels
 reuse one scratch buffer per call instead of allocating small arrays per primitive, which was
-most of their cost) and an allocating form that wraps it.  All are inlined into their callers
+most of their cost); the ones the force kernels use also have an allocating form that wraps it
+(:func:`rotate`, :func:`point`, :func:`point_rate`).  All are inlined into their callers
 (``inline="always"``): a call of a separately compiled function with array arguments costs more
 than these few flops (its arguments' reference counts, atomic updates, are changed on entry and
 exit).
@@ -122,14 +123,6 @@ def rotate_jacobian_into(jac, q, nc, body, u):
 
 
 @njit(cache=True, inline="always")
-def rotate_jacobian(q, nc, body, u):
-    """∂(A_b ū)/∂q_b, shape (3, nc); translation columns are zero."""
-    jac = np.empty((3, nc))
-    rotate_jacobian_into(jac, q, nc, body, u)
-    return jac
-
-
-@njit(cache=True, inline="always")
 def point_jacobian_into(jac, q, nc, body, u):
     """jac[:] = ∂(r_b + A_b ū)/∂q_b, jac shape (3, nc)."""
     rotate_jacobian_into(jac, q, nc, body, u)
@@ -138,14 +131,6 @@ def point_jacobian_into(jac, q, nc, body, u):
         jac[1, 1] = 1.0
         if nc == SPATIAL_NC:
             jac[2, 2] = 1.0
-
-
-@njit(cache=True, inline="always")
-def point_jacobian(q, nc, body, u):
-    """∂(r_b + A_b ū)/∂q_b, shape (3, nc)."""
-    jac = np.empty((3, nc))
-    point_jacobian_into(jac, q, nc, body, u)
-    return jac
 
 
 @njit(cache=True, inline="always")
@@ -177,14 +162,6 @@ def rotate_rate_into(out, q, v, nc, body, u):
         + 2.0 * (d2 * dot + t2 * rate_dot + t0 * (d3 * u[0] - d1 * u[2]))
     out[2] = d0 * (4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0])) \
         + 2.0 * (d3 * dot + t3 * rate_dot + t0 * (d1 * u[1] - d2 * u[0]))
-
-
-@njit(cache=True, inline="always")
-def rotate_rate(q, v, nc, body, u):
-    """d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b, shape (3,)."""
-    out = np.empty(3)
-    rotate_rate_into(out, q, v, nc, body, u)
-    return out
 
 
 @njit(cache=True, inline="always")
@@ -225,11 +202,3 @@ def rotate_quadratic_into(out, q, v, nc, body, u):
     out[0] = 4.0 * (d0 * d0 * u[0] + d1 * dot + d0 * (d2 * u[2] - d3 * u[1]))
     out[1] = 4.0 * (d0 * d0 * u[1] + d2 * dot + d0 * (d3 * u[0] - d1 * u[2]))
     out[2] = 4.0 * (d0 * d0 * u[2] + d3 * dot + d0 * (d1 * u[1] - d2 * u[0]))
-
-
-@njit(cache=True, inline="always")
-def rotate_quadratic(q, v, nc, body, u):
-    """The part of d²(A_b ū)/dt² without q̈, shape (3,) (see :func:`rotate_quadratic_into`)."""
-    out = np.empty(3)
-    rotate_quadratic_into(out, q, v, nc, body, u)
-    return out
