@@ -288,12 +288,9 @@ def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, pro
 
     Returns
     -------
-    q, v : ndarray
-        The last good state.
-    done : int
-        Index of the last good step.
-    status : int
-        :data:`RUNNING` when every target was reached, else the code of the failure.
+    q, v, done, status
+        As :func:`run_steps` returns them, ``status`` :data:`RUNNING` when every target was
+        reached.
     reached : int
         Number of targets whose state was stored.
     """

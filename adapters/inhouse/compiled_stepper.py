@@ -1,5 +1,6 @@
-"""The in-house stepper on the compiled path (:mod:`adapters.inhouse.compiled`): from one sample
-time to the next in a single compiled call, so no Python runs per step.
+"""The in-house stepper on the compiled path (:mod:`adapters.inhouse.compiled`): a whole run, or
+for partitioning each stretch between two sample times, in a single compiled call, so no Python
+runs per step.
 
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
 rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method
