@@ -28,7 +28,7 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from adapters.inhouse.linalg import CERTIFICATE_MARGIN, min_norm_solve
+from adapters.inhouse.linalg import CERTIFICATE_MARGIN, gram_condition_bound, min_norm_solve
 
 #: From this many constraint rows on the banded solves are used.  Measured on n_fourbar@N at the
 #: start (µs per acceleration solve, dense / banded; per projection solve likewise): 14 rows
@@ -158,18 +158,21 @@ def _banded_product(matrix, weights, body_row_start, body_rows, body_columns, po
 
 
 @njit(cache=True)
-def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
-    """Solve (A W Aᵀ) x = rhs by banded Cholesky when the estimated 2-norm condition number of
-    S = A W Aᵀ is below 1/(CERTIFICATE_MARGIN · cut), A (m, n) holding the pattern of
-    ``sparsity_arrays`` (:attr:`Sparsity.arrays`), W = diag(weights) (n,) positive.  The estimate:
-    the largest absolute row sum of S (≥ λ_max) over λ_min from :data:`INVERSE_ITERATIONS` steps
-    of inverse iteration with the factor (≥ λ_min, converging to it).
+def _banded_factor(matrix, weights, sparsity_arrays):
+    """Banded Cholesky of S = A W Aᵀ (rows in the order of ``sparsity_arrays``) with the estimate
+    of its 2-norm condition number that :func:`banded_spd_solve` certifies: the largest absolute
+    row sum of S (≥ λ_max) times the estimate of 1/λ_min from :data:`INVERSE_ITERATIONS` steps of
+    inverse iteration with the factor (the Rayleigh quotient of S⁻¹, converging to 1/λ_min from
+    below).
 
     Returns
     -------
-    accepted : bool
-        False when the matrix is not positive definite or its estimated condition too large.
-    x : ndarray, shape (m,) or (0,)
+    positive : bool
+        False when S is not positive definite (the other returns are then meaningless).
+    band : ndarray, shape (kd + 1, m)
+        The factor in LAPACK's banded storage.
+    condition : float
+        The estimate of κ₂(S).
     """
     _, body_row_start, body_rows, body_columns, position, bandwidth = sparsity_arrays
     m = matrix.shape[0]
@@ -183,9 +186,7 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
     info = np.zeros(1, dtype=np.int32)
     _dpbtrf(lower.ctypes, size.ctypes, kd.ctypes, band.ctypes, lead.ctypes, info.ctypes)
     if info[0] != 0:
-        return False, np.empty(0)
-    # λ_min by inverse iteration on the factor (the Rayleigh quotient of S⁻¹ converges to 1/λ_min
-    # from below); λ_max ≤ the largest absolute row sum (Gershgorin).
+        return False, band, np.inf
     vector = np.ones(m) / np.sqrt(m)
     inverse_estimate = 0.0
     for _ in range(INVERSE_ITERATIONS):
@@ -194,8 +195,32 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
                 image.ctypes, size.ctypes, info.ctypes)
         inverse_estimate = vector @ image
         vector = image / np.sqrt(image @ image)
-    if not CERTIFICATE_MARGIN * cut * norm * inverse_estimate < 1.0:
+    return True, band, norm * inverse_estimate
+
+
+@njit(cache=True)
+def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
+    """Solve (A W Aᵀ) x = rhs by banded Cholesky when the estimated 2-norm condition number of
+    S = A W Aᵀ (:func:`_banded_factor`) is below 1/(CERTIFICATE_MARGIN · cut), A (m, n) holding
+    the pattern of ``sparsity_arrays`` (:attr:`Sparsity.arrays`), W = diag(weights) (n,) positive.
+
+    Returns
+    -------
+    accepted : bool
+        False when the matrix is not positive definite or its estimated condition too large.
+    x : ndarray, shape (m,) or (0,)
+    """
+    position, bandwidth = sparsity_arrays[4], sparsity_arrays[5]
+    m = matrix.shape[0]
+    positive, band, condition = _banded_factor(matrix, weights, sparsity_arrays)
+    if not (positive and CERTIFICATE_MARGIN * cut * condition < 1.0):
         return False, np.empty(0)
+    lower = np.array([ord("L")], dtype=np.uint8)
+    size = np.array([m], dtype=np.int32)
+    kd = np.array([bandwidth], dtype=np.int32)
+    lead = np.array([bandwidth + 1], dtype=np.int32)
+    one = np.array([1], dtype=np.int32)
+    info = np.zeros(1, dtype=np.int32)
     permuted = np.empty(m)
     for r in range(m):
         permuted[position[r]] = rhs[r]
@@ -205,6 +230,25 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
     for r in range(m):
         solution[r] = permuted[position[r]]
     return True, solution
+
+
+@njit(cache=True)
+def conditioning_indicator(matrix, sparsity_arrays):
+    """ρ̂ = κ̂(Φ_q Φ_qᵀ)^(-1/2), an estimate of σ_min/σ_max of Φ_q = ``matrix`` (m, n) from the
+    certificates' condition estimates (:func:`~adapters.inhouse.linalg.gram_condition_bound`
+    below :data:`BANDED_MIN_ROWS` rows, :func:`_banded_factor` from there on); 0 when Φ_q Φ_qᵀ
+    is not positive definite (rank lost, or redundant rows kept).  Near a singular position
+    σ_min/σ_max falls linearly with the distance to it, and so does ρ̂: the same fraction of it
+    to within a factor that varies smoothly (between 1/m and 1).
+    """
+    if matrix.shape[0] >= BANDED_MIN_ROWS:
+        positive, _, condition = _banded_factor(matrix, np.ones(matrix.shape[1]),
+                                                sparsity_arrays)
+    else:
+        positive, condition = gram_condition_bound(matrix)
+    if not positive or not condition < np.inf:
+        return 0.0
+    return 1.0 / np.sqrt(condition)
 
 
 @njit(cache=True)

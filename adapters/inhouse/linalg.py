@@ -155,6 +155,24 @@ def certified_spd_solve(matrix, rhs, cut):
 
 
 @njit(cache=True)
+def gram_condition_bound(matrix):
+    """The bound of :func:`certified_spd_solve` on κ₂(A Aᵀ), A = ``matrix`` (m, n):
+    ‖S‖_F ‖L⁻¹‖_F² with S = A Aᵀ = L Lᵀ.
+
+    Returns
+    -------
+    positive : bool
+        False when A Aᵀ is not positive definite (the bound is then inf).
+    bound : float
+    """
+    gram = weighted_gram(matrix, np.ones(matrix.shape[1]))
+    positive, lower = _cholesky(gram)
+    if not positive:
+        return False, np.inf
+    return True, _frobenius(gram) * _inverse_frobenius_squared(lower)
+
+
+@njit(cache=True)
 def weighted_gram(matrix, weights):
     """A W Aᵀ for A = ``matrix`` (m, n) and W = diag(``weights``) (n,), shape (m, m), exactly
     symmetric (the lower triangle is accumulated and mirrored).  Plain loops, no BLAS call; the
