@@ -13,9 +13,9 @@ unit bars (m = 1 kg, L = 1 m):
 so 3 φ̈ = −3.5 g cos φ, and the first crank's tip is (cos φ, sin φ).
 
 The full model is checked here against that model through the in-house ``rk4+direct`` at
-Δt = 1e-3, a step where that method is accurate (it loses accuracy at smaller steps near the
-singular passages, issue "Hard scenes"); the verified reference, built along the declared branch,
-is checked against it in ``tests/test_branch_route.py``.
+Δt = 1e-3 (its convergence through the passages, with placed passage steps, is in
+``tests/test_fold.py``); the verified reference, built along the declared branch, is checked
+against it in ``tests/test_branch_route.py``.
 """
 
 from __future__ import annotations

@@ -33,7 +33,8 @@ FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitionin
 DEFAULT_METHOD = "rk4+baumgarte"
 #: The most accurate fixed-step setting: RK4 with position and velocity projection, Newton to
 #: round-off (near a singular position a residual ε leaves the state ~ε/ψ off the branch, see
-#: :class:`~adapters.inhouse.stabilisation.DirectCorrection`).
+#: :class:`~adapters.inhouse.stabilisation.DirectCorrection`), singular positions passed by placed
+#: steps (:mod:`adapters.inhouse.fold`).
 BEST_METHOD = "rk4+direct:proj_tol=1e-15"
 ALIASES = {"default": DEFAULT_METHOD, "best": BEST_METHOD}
 

@@ -28,8 +28,9 @@ import numpy as np
 from numba import njit
 
 from adapters.inhouse import kernels
-from adapters.inhouse.banded import min_norm_correction, pattern_matvec
+from adapters.inhouse.banded import conditioning_indicator, min_norm_correction, pattern_matvec
 from adapters.inhouse.dynamics import index1_acceleration
+from adapters.inhouse.fold import passage_times, plan_passage
 from adapters.inhouse.rank import full_pivot_elimination
 
 RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILED_RANK, \
@@ -70,7 +71,8 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
              counters):
     """Direct violation correction (002 eq. 127 and 137) with the truncated pseudo-inverse;
     the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project` (and its stop
-    when an iteration no longer reduces max |Φ|)."""
+    when an iteration no longer reduces max |Φ|).  Also returns the conditioning indicator ρ̂ of
+    the corrected configuration (:func:`~adapters.inhouse.banded.conditioning_indicator`)."""
     previous = np.inf
     for _ in range(proj_max_iter):
         residual = _kept_rows(kernels.phi(q, t, *constraint_args), rows)
@@ -86,7 +88,7 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     jac = _rows_jacobian(q, t, rows, constraint_args, counters)
     v = v - min_norm_correction(jac, pattern_matvec(jac, sparsity_arrays[0], v), cut,
                                 sparsity_arrays)
-    return q, v
+    return q, v, conditioning_indicator(jac, sparsity_arrays)
 
 
 @njit(cache=True)
@@ -201,8 +203,45 @@ def split_check(q_ind, v_ind, t, rows, constraint_args, partition, counters):
 
 
 @njit(cache=True)
+def _exception_code(partition):
+    """The failure code of an exception in a step: :data:`FAILED_NEWTON` when :func:`expand`
+    recorded a Newton failure, else :data:`FAILED_LINALG`."""
+    return FAILED_NEWTON if partition[8][0] != 0.0 else FAILED_LINALG
+
+
+@njit(cache=True)
+def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, partition, limit,
+                    passage, counters):
+    """One step of the method from (q, q̇) at t to t_new with the ``direct`` correction after it;
+    the new ρ̂ goes to ``passage[2][1]`` (the old one to ``passage[2][0]``) when it is measured.
+
+    Returns
+    -------
+    q_new, v_new : ndarray
+    status : int
+        :data:`RUNNING`, or the code of the failure (the state is then not usable).
+    """
+    proj_tol, proj_max_iter, cut = projection
+    try:
+        q_new, v_new = _nystrom_step(q, v, t, t_new - t, tableau, model, partition,
+                                     stabilisation, counters)
+        if stabilisation == PROJECTED:
+            q_new, v_new, rho = _project(q_new, v_new, t_new, model[1], proj_tol, proj_max_iter,
+                                         cut, model[2], model[4], counters)
+            passage[2][0], passage[2][1] = passage[2][1], rho
+    except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
+        return q, v, _exception_code(partition)
+    squared_q, squared_v = q_new @ q_new, v_new @ v_new
+    if not np.isfinite(squared_q + squared_v):
+        return q, v, DIVERGED_NONFINITE
+    if max(squared_q, squared_v) > limit * limit:
+        return q, v, DIVERGED_LIMIT
+    return q_new, v_new, RUNNING
+
+
+@njit(cache=True)
 def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projection, partition,
-              check_due, limit, counters):
+              check_due, limit, passage, counters):
     """Steps ``first + 1 … last`` of a fixed-step run from the state (q, q̇) after step ``first``.
 
     Parameters
@@ -229,6 +268,11 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         Whether the split is checked before the next step; updated in place.
     limit : float
         Divergence limit on the 2-norms of q and q̇.
+    passage : tuple (placement (2,), rho_zone, indicators (2,), count (1,) int64)
+        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; ``direct`` only,
+        zero placement turns them off): (c*, g/2) of the tableau, :data:`~adapters.inhouse.fold.
+        FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid points (updated in place) and the
+        number of passages placed (incremented in place).
     counters : ndarray of int64, shape (4,)
         Incremented in place (:data:`RHS_EVALS` …).
 
@@ -242,37 +286,49 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         :data:`RUNNING` when step ``last`` was reached, :data:`REPARTITION` when the split must
         be chosen again before step ``done + 1``, else the code of the failure in that step.
     """
-    proj_tol, proj_max_iter, cut = projection
     rows, constraint_args = model[1], model[2]
-    for k in range(first, last):
+    placement, rho_zone, indicators, passages = passage
+    k = first
+    while k < last:
         t = t0 + k * dt
-        t_new = t0 + (k + 1) * dt
-        try:
-            if stabilisation == PARTITIONED and check_due[0]:
+        if stabilisation == PARTITIONED and check_due[0]:
+            try:
                 verdict = split_check(q, v, t, rows, constraint_args, partition, counters)
-                if verdict != RUNNING:
-                    return q, v, k, verdict
-                check_due[0] = 0
-            q_new, v_new = _nystrom_step(q, v, t, t_new - t, tableau, model, partition,
-                                         stabilisation, counters)
-            if stabilisation == PROJECTED:
-                q_new, v_new = _project(q_new, v_new, t_new, rows, proj_tol, proj_max_iter, cut,
-                                        constraint_args, model[4], counters)
-        except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
-            return q, v, k, FAILED_NEWTON if partition[8][0] != 0.0 else FAILED_LINALG
-        squared_q, squared_v = q_new @ q_new, v_new @ v_new
-        if not np.isfinite(squared_q + squared_v):
-            return q, v, k, DIVERGED_NONFINITE
-        if max(squared_q, squared_v) > limit * limit:
-            return q, v, k, DIVERGED_LIMIT
-        q, v = q_new, v_new
+            except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
+                return q, v, k, _exception_code(partition)
+            if verdict != RUNNING:
+                return q, v, k, verdict
+            check_due[0] = 0
+        lead, length = 0.0, 0.0
+        if placement[0] > 0.0:
+            lead, length = plan_passage(t, dt, t0 + last * dt, indicators[1], indicators[0],
+                                        rho_zone, placement)
+        if length > 0.0:
+            ends, k_end = passage_times(t0, dt, k, lead, length)
+            q_new, v_new, t_start = q, v, t
+            for t_end in ends:
+                q_new, v_new, status = _step_and_check(
+                    q_new, v_new, t_start, t_end, tableau, model, stabilisation, projection,
+                    partition, limit, passage, counters)
+                if status != RUNNING:
+                    return q, v, k, status
+                t_start = t_end
+            passages[0] += 1
+        else:
+            k_end = k + 1
+            q_new, v_new, status = _step_and_check(
+                q, v, t, t0 + k_end * dt, tableau, model, stabilisation, projection, partition,
+                limit, passage, counters)
+            if status != RUNNING:
+                return q, v, k, status
+        q, v, k = q_new, v_new, k_end
         check_due[0] = 1
     return q, v, last, RUNNING
 
 
 @njit(cache=True)
 def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
-                partition, check_due, limit, counters, q_out, v_out):
+                partition, check_due, limit, passage, counters, q_out, v_out):
     """:func:`run_steps` from step ``first`` on through every step index of ``targets``, keeping
     the state at each: a whole run in one call, for formulations whose states are read without
     side effects (every one but partitioning, whose reading moves its Newton start).
@@ -297,7 +353,7 @@ def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, pro
     for i in range(targets.shape[0]):
         q, v, first, status = run_steps(q, v, t0, dt, first, targets[i], tableau, model,
                                         stabilisation, projection, partition, check_due, limit,
-                                        counters)
+                                        passage, counters)
         if status != RUNNING:
             return q, v, first, status, i
         q_out[i] = q

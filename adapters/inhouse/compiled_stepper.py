@@ -27,6 +27,7 @@ import numpy as np
 from adapters.base import RunFailure, RunGrid
 from adapters.inhouse import compiled
 from adapters.inhouse.driver import FormulationStepper
+from adapters.inhouse.fold import Passages
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
 from adapters.inhouse.states import body_states
@@ -82,6 +83,7 @@ class CompiledStepper(FormulationStepper):
         self._limit = float(integrator_params["divergence_limit"])
         self._counters = np.zeros(4, dtype=np.int64)
         self._check_due = np.zeros(1, dtype=np.int64)
+        self.passages = Passages.of(formulation, integrator_class(integrator_name))
         self._partition = None
         self._restart(*self._start_state)
         self._samples: _Samples | None = None
@@ -121,7 +123,8 @@ class CompiledStepper(FormulationStepper):
     def _run(self, last: int):
         return compiled.run_steps(self.q, self.v, 0.0, self.grid.dt, self.steps, last,
                                   self._tableau, self._model, self._code, self._projection,
-                                  self._partition, self._check_due, self._limit, self._counters)
+                                  self._partition, self._check_due, self._limit,
+                                  self.passages.arrays, self._counters)
 
     def _step_to(self, t: float) -> None:
         target = self.grid.steps(t)
@@ -157,8 +160,8 @@ class CompiledStepper(FormulationStepper):
         q_out, v_out = np.empty((targets.size, q.size)), np.empty((targets.size, v.size))
         q, v, done, status, reached = compiled.run_samples(
             q, v, 0.0, self.grid.dt, first, targets, self._tableau, self._model, self._code,
-            self._projection, self._partition, self._check_due, self._limit, self._counters,
-            q_out, v_out)
+            self._projection, self._partition, self._check_due, self._limit,
+            self.passages.arrays, self._counters, q_out, v_out)
         return _Samples(targets[:reached], q_out[:reached], v_out[:reached], (q, v, done, status))
 
     def _take_sample(self, target: int) -> None:
@@ -210,7 +213,8 @@ class CompiledStepper(FormulationStepper):
                 + int(self._counters[compiled.FACTORIZATIONS]),
                 "newton_iterations": own["newton_iterations"]
                 + int(self._counters[compiled.NEWTON_ITERATIONS]),
-                "repartitions": getattr(self.formulation, "repartitions", 0)}
+                "repartitions": getattr(self.formulation, "repartitions", 0),
+                "passages": int(self.passages.count[0])}
 
 
 @dataclass(frozen=True)

@@ -18,6 +18,7 @@ import numpy as np
 
 from adapters.base import RunFailure, RunGrid, Stepper
 from adapters.inhouse.constraints import layout_of
+from adapters.inhouse.fold import Passages
 from adapters.inhouse.kinematics import common_start
 from adapters.inhouse.stabilisation import Formulation
 from adapters.inhouse.states import body_states
@@ -97,6 +98,7 @@ class InhouseStepper(FormulationStepper):
         if self._project_samples:
             self.notes.append(PROJECTED_SAMPLES_NOTE)
         self._repartition_due = False
+        self.passages = Passages.of(formulation, self.integrator)
 
     # -- stepping ------------------------------------------------------------------------------
     def _step_to(self, t: float) -> None:
@@ -104,15 +106,23 @@ class InhouseStepper(FormulationStepper):
             while self.integrator.t < t:
                 self._step()
         else:
-            while self.steps < self.grid.steps(t):
-                self._step()
+            last = self.grid.steps(t)
+            while self.steps < last:
+                self._step(last)
 
-    def _step(self) -> None:
-        """One integrator step; the re-partition check of the previous step's state first."""
+    def _step(self, last: int = 0) -> None:
+        """One integrator step, or a placed passage of a singular position ending by grid step
+        ``last`` (fixed-step methods); the re-partition check of the previous step's state
+        first."""
         if self._repartition_due:
             self._repartition_if_needed()
         integrator = self.integrator
-        status = integrator.step()
+        passage = self.passages.plan(self.steps, self.grid.dt, last)
+        if passage is None:
+            status = integrator.step()
+        else:
+            status = integrator.step_through(*passage)
+            self.passages.count[0] += status == RUNNING
         self.steps = self._banked_steps + integrator.n_steps
         self.t_good = integrator.t
         if status != RUNNING:
@@ -174,4 +184,5 @@ class InhouseStepper(FormulationStepper):
                     + self.formulation.counters.get(key, 0)
                     for key, attribute in _INTEGRATOR_COUNTERS.items()}
         counters["repartitions"] = getattr(self.formulation, "repartitions", 0)
+        counters["passages"] = int(self.passages.count[0])
         return counters

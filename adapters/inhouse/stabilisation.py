@@ -30,7 +30,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
-from adapters.inhouse.banded import min_norm_correction, pattern_matvec
+from adapters.inhouse.banded import conditioning_indicator, min_norm_correction, pattern_matvec
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
 from harness.model import Mechanism
@@ -249,8 +249,9 @@ class _Projection(Formulation):
     projection of the velocity there turns it towards the other branch (a rate error ≈ εV/ψ²
     at a distance ψ from the crossing, which small steps come close to).  Truncated, the
     projection leaves the lost direction to the integrator while σ is small.  Measured on
-    double_fourbar (rk4+direct, start conditioning 0.2, with the acceleration cut
-    :data:`~adapters.inhouse.dynamics.ACCELERATION_CUT`; largest tip error over 10 s at dt 1e-4):
+    double_fourbar (rk4+direct on the plain grid, before placed passages, start conditioning 0.2,
+    with the acceleration cut :data:`~adapters.inhouse.dynamics.ACCELERATION_CUT`; largest tip
+    error over 10 s at dt 1e-4):
     proj_tol 1e-12 with singular_cut 5e-3: 1.4e-5 m; proj_tol 1e-15 with singular_cut 1e-3,
     5e-3, 2e-2, 5e-2, 1e-1: 9.3e-6, 3.4e-7, 4.8e-8, 7.1e-9, 1.2e-8 m.  A tight proj_tol matters
     as much: Newton stopped at |Φ| = ε leaves the state on the hyperbola ψ·b = ε.
@@ -291,13 +292,34 @@ class _Projection(Formulation):
 
 
 class DirectCorrection(_Projection):
+    """Position (002 eq. 127) and velocity (eq. 137) projection after every step.
+
+    Every projection also measures the conditioning indicator ρ̂ of the corrected configuration
+    (:func:`~adapters.inhouse.banded.conditioning_indicator`, from the velocity projection's
+    Φ_q): ``indicators`` holds it at the last two projections (both ρ̂ at the start before the
+    first), the input of the placed passages of singular positions (:mod:`adapters.inhouse.fold`;
+    parameter ``passage``: 1 places them, 0 steps the plain grid) that the fixed-step one-step
+    methods take.
+    """
+
     name = "direct"
     description = "direct violation correction: position (002 eq. 127) and velocity (eq. 137) projection"
+    defaults = {**_Projection.defaults, "passage": 1}
+
+    def __init__(self, mech, q0, dt, **params):
+        super().__init__(mech, q0, dt, **params)
+        start = conditioning_indicator(
+            np.ascontiguousarray(self.constraints.jacobian(q0, 0.0)[self.rows]),
+            self.constraints.sparsity.arrays)
+        self.indicators = np.array([start, start])
 
     def project(self, t, q, v):
         q = self.project_position(t, q)
-        jac = self.jacobian(t, q)
-        return q, v - self._min_norm(jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v))
+        jac = np.ascontiguousarray(self.jacobian(t, q))
+        sparsity = self.constraints.sparsity
+        self.indicators[0], self.indicators[1] = self.indicators[1], conditioning_indicator(
+            jac, sparsity.arrays)
+        return q, v - self._min_norm(jac, pattern_matvec(jac, sparsity.row_columns, v))
 
 
 class GeometricElimination(_Projection):

@@ -197,27 +197,35 @@ class Integrator:
         """
         if self.status != RUNNING:
             return self.status
-        t_target = self._target_time()
+        new = self._checked(self._target_time(), self._step_impl)
+        if new is not None:
+            self.t, self.q, self.v = new
+            self.n_steps += 1
+        return self.status
+
+    def _checked(self, t_target: float, take):
+        """``take()`` → (t_new, q, q̇), projected by the problem and checked for a finite state
+        within ``divergence_limit``; None after failing the run (at ``t_target`` when the step
+        raised, else at t_new).  The integrator's state is not changed."""
         try:
-            t_new, q_new, v_new = self._step_impl()
+            t_new, q_new, v_new = take()
             q_new, v_new = self.problem.project(t_new, q_new, v_new)
             q_new = np.asarray(q_new, dtype=float)
             v_new = np.asarray(v_new, dtype=float)
         except PROBLEM_ERRORS as exc:
             self._fail(FAILED, t_target, f"{type(exc).__name__}: {exc}")
-            return self.status
+            return None
         limit = self.params["divergence_limit"]
         # One dot product per vector (ndarray.dot: a third of the cost of @ on short vectors);
         # NaN and inf propagate into their sum (not into max()).
         squared_q, squared_v = float(q_new.dot(q_new)), float(v_new.dot(v_new))
         if not np.isfinite(squared_q + squared_v):
             self._fail(DIVERGED, t_new, "non-finite state")
-        elif max(squared_q, squared_v) > limit * limit:
+            return None
+        if max(squared_q, squared_v) > limit * limit:
             self._fail(DIVERGED, t_new, f"state norm exceeds divergence_limit={limit:g}")
-        else:
-            self.t, self.q, self.v = t_new, q_new, v_new
-            self.n_steps += 1
-        return self.status
+            return None
+        return t_new, q_new, v_new
 
     def _target_time(self) -> float:
         """End time of the next fixed step, t0 + (n_steps + 1)·dt (no accumulated drift)."""

@@ -234,6 +234,29 @@ class NystromIntegrator(Integrator):
         q_new, v_new = self._rule(self.t, self.q, self.v, t_new - self.t, self.tableau)
         return t_new, q_new, v_new
 
+    def step_through(self, ends, steps: int) -> str:
+        """Steps of this method ending at the times ``ends`` (s, increasing, the last on the grid
+        ``steps`` grid steps on), each projected and checked as :meth:`step` does; together they
+        count as ``steps`` steps (a placed passage, :mod:`adapters.inhouse.fold`).  A failure
+        leaves the state at the grid point before them.
+
+        Returns
+        -------
+        status : str
+        """
+        if self.status != RUNNING:
+            return self.status
+        t, q, v = self.t, self.q, self.v
+        for t_new in ends:
+            new = self._checked(t_new, lambda: (t_new, *self._rule(t, q, v, t_new - t,
+                                                                    self.tableau)))
+            if new is None:
+                return self.status
+            t, q, v = new
+        self.t, self.q, self.v = t, q, v
+        self.n_steps += steps
+        return self.status
+
     def steps_unchecked(self, count: int, rule) -> str:
         """Up to ``count`` steps by ``rule``, a step rule of this method (:func:`step_rule`) over a
         right-hand side without the problem's own per-call checks, each new state checked as
@@ -367,12 +390,14 @@ class RK8(NystromIntegrator):
 
     Not for singular passages: its twelve stages probe the configuration close to a fold, where
     the index-1 accelerations grow like the inverse of Φ_q's smallest singular value, and its
-    error there grows as the step shrinks.  Measured with ``direct`` (2026-11-25, first 2 s, error
-    of the main output against the verified reference, dt = 1e-2 / 1e-3 / 1e-4 s):
-    double_fourbar 7.7e-8 / 3.2e-2 / 2.8e-3 m (rk4: 1.0e-7 / 1.5e-11 / 1.5e-10),
-    parallelogram_fourbar 2.9e-10 / 2.3e-7 m / diverged at 1.08 s.  Away from folds it is the
-    most accurate method per cost (Andrews' squeezer 4.7e-11 at 1e-4 s, where rk4 has 4.7e-6;
-    stiff_fourbar runs at 1e-3 s, where rk4 diverges).
+    error there grows as the step shrinks, placed passages (:mod:`adapters.inhouse.fold`) or
+    not.  Measured with ``direct`` (2026-11-25, first 2 s, error of the main output against the
+    verified reference, dt = 1e-2 / 1e-3 / 1e-4 s), plain grid: double_fourbar 7.7e-8 / 3.2e-2 /
+    2.8e-3 m (rk4: 1.0e-7 / 1.5e-11 / 1.5e-10), parallelogram_fourbar 2.9e-10 / 2.3e-7 /
+    diverged at 1.08 s; with placed passages: double_fourbar 1.8e-9 / 1.3e-8 / 3.3e-7,
+    parallelogram_fourbar 4.0e-10 / 2.5e-6 / 1.7e-6.  Away from folds it is the most accurate
+    method per cost (Andrews' squeezer 4.7e-11 at 1e-4 s, where rk4 has 4.7e-6; stiff_fourbar
+    runs at 1e-3 s, where rk4 diverges).
     """
 
     name = "rk8"

@@ -1,0 +1,192 @@
+"""Passing a singular position with a placed step: no stage of a fixed-step method lands next to it.
+
+At a singular position (a fold or branch crossing of the constraint set: σ_min of Φ_q → 0) the
+index-1 acceleration (002 eq. 77) divides the stage state's small inconsistencies by σ_min: a
+stage that lands at a distance ψ from the crossing gets an acceleration error ~ ε/ψ, ε the
+state's constraint residual there.  With a fixed step the stages land wherever the grid puts them,
+and the smaller the step, the closer the closest one comes: measured on double_fourbar
+(rk4+direct, proj_tol 1e-15, 10 s), the tip error grew from 9.7e-10 m at dt 1e-3 to 1.8e-8 m at
+1e-4, and rk5 and rk8 lost more.
+
+So the step that passes a singular position is placed: the passage is predicted from the
+conditioning indicator ρ̂ (:func:`~adapters.inhouse.banded.conditioning_indicator`, ≈ σ_min/σ_max
+of Φ_q, linear in the distance to the crossing) at the last two step ends, and the run takes
+
+1. a *lead* step up to where the passage lies at the fraction c* of the next step, c* the middle
+   of the widest gap g between the tableau's stage times (and 1): 1/4 for rk4 (g = 1/2), 0.47
+   for rk8 (g = 0.27);
+2. the *passage* step of length H = max(dt, :data:`SAFE_INDICATOR` / (g/2 · |dρ̂/dt|)), so that
+   its stages stay at least a ρ̂-distance SAFE_INDICATOR from the crossing;
+3. a *closing* step back onto the run's grid t0 + k·dt,
+
+each a step of the method followed by the formulation's projection.  The three replace the grid
+steps they cover; a passage that would cover a sample time is shortened to end there (or, with
+no room for half a step, not placed).  The state is read only at grid times, so the samples are
+those of a run on the grid.  Used by the ``direct`` correction with the fixed-step one-step
+methods, on both stepping paths (the same plan from the same numbers, so the same steps).
+
+Measured on double_fourbar (``best`` = rk4+direct, proj_tol 1e-15; tip error against its
+one-degree-of-freedom model, m; dt = 1e-2 / 1e-3 / 1e-4 / 1e-5 s):
+
+* first 1.5 s (two passages): placed 1.24e-7 / 1.21e-11 / 2.73e-12 / 2.26e-12, plain grid
+  1.23e-7 / 1.41e-11 / 4.02e-11 / 4.48e-11;
+* whole 10 s (ten passages; against the verified reference): placed 2.9e-6 / 1.6e-10 / 2.4e-10 /
+  2.2e-10, plain grid 3.1e-6 / 9.7e-10 / 1.8e-8 / 8.1e-9.  Between passages the crank creeps
+  over the top of its swing, an unstable position that multiplies an angle error 14–33-fold on
+  the way (from 1.23 s to 2.65 s, measured on the one-degree-of-freedom model): the ~1e-12 left
+  after a passage becomes the ~1e-10 floor of the 10 s runs.
+
+Per step it costs the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ (banded from
+:data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows): rk4+direct 18.2 → 18.8 µs on fourbar,
+55.3 → 56.9 µs on slider_crank (benchmarks/step_cost.py).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+#: A passage is planned only where ρ̂ has fallen below this fraction of its value at the start
+#: (a crossing, not the ordinary rise and fall of the conditioning along a motion).
+FOLD_ZONE = 0.1
+#: The ρ̂-distance from the crossing that the passage step keeps its stages at.  Chosen on
+#: parallelogram_fourbar (best, 10 s, largest error of its angle and tip outputs against the
+#: reference at dt 1e-2 / 1e-3 / 1e-4 / 1e-5 s): 3e-5 gave 2.3e-7 / 6.9e-11 / 2.5e-11 / 4.2e-11,
+#: 1e-4 gave 2.3e-7 / 6.9e-11 / 3.1e-11 / 1.2e-11.  (On double_fourbar, 10 s: 3e-5 gave 1.3e-10 / 5.4e-10 m at 1e-4 /
+#: 1e-5, 1e-5 gave 6.1e-10 / 4.7e-10 m.)
+SAFE_INDICATOR = 1e-4
+
+
+def passage_placement(c: np.ndarray) -> np.ndarray:
+    """(c*, g/2): the middle of the widest gap g between the sorted distinct stage times c (s,)
+    and 1 (the first widest one), and the clearance from it to the nearest stage time, as
+    fractions of the step; shape (2,)."""
+    times = np.unique(np.append(np.asarray(c, dtype=float), [0.0, 1.0]))
+    gaps = np.diff(times)
+    widest = int(np.argmax(gaps))
+    return np.array([times[widest] + gaps[widest] / 2, gaps[widest] / 2])
+
+
+@njit(cache=True)
+def plan_passage(t, dt, t_last, rho, rho_previous, rho_zone, placement):
+    """The lead and passage step lengths (s) when the next grid step should be replaced by a
+    placed passage, else (0, 0).
+
+    Parameters
+    ----------
+    t : float
+        Time of the current grid point, s.
+    dt : float
+        The run's step, s.
+    t_last : float
+        The grid time the run must stop at next (a sample), s; the passage ends by then.
+    rho, rho_previous : float
+        ρ̂ at t and at the grid point before.
+    rho_zone : float
+        :data:`FOLD_ZONE` × ρ̂ at the start.
+    placement : ndarray, shape (2,)
+        (c*, g/2) of the tableau (:func:`passage_placement`).
+    """
+    fraction, clearance = placement[0], placement[1]
+    if not (0.0 < rho < rho_previous and rho < rho_zone):
+        return 0.0, 0.0
+    rate = (rho_previous - rho) / dt
+    lead_time = rho / rate
+    length = max(dt, SAFE_INDICATOR / (clearance * rate))
+    if lead_time > fraction * length + dt:
+        return 0.0, 0.0  # the crossing is more than a step beyond the passage's start
+    if lead_time < fraction * length:  # too close to centre a full passage: a shorter one
+        length = lead_time / fraction
+    lead = lead_time - fraction * length
+    room = t_last - t - lead_time  # from the crossing to the next sample
+    if lead_time + (1.0 - fraction) * length > t_last - t:
+        length = room / (1.0 - fraction)
+        lead = lead_time - fraction * length
+    if length < 0.5 * dt:
+        return 0.0, 0.0  # no room for a passage that helps: an ordinary step
+    return lead, length
+
+
+@njit(cache=True)
+def passage_times(t0, dt, k, lead, length):
+    """End times of the placed steps from grid point k (t = t0 + k·dt): the lead step (when
+    ``lead`` > 0), the passage, and the closing step onto the grid point k_end, the first at or
+    after the passage's end (a passage ending within 1e-6·dt of a grid point is stretched to it).
+
+    Returns
+    -------
+    ends : ndarray, shape (1,) to (3,)
+        Increasing end times, s; the last is t0 + k_end·dt.  A lead of at most 1e-6·dt is
+        left out (the passage then starts at t).
+    k_end : int
+    """
+    t = t0 + k * dt
+    passage_end = t + lead + length
+    k_end = int(np.ceil((passage_end - t0) / dt - 1e-6))
+    t_grid = t0 + k_end * dt
+    ends = np.empty(3)
+    count = 0
+    if lead > 1e-6 * dt:
+        ends[count] = t + lead
+        count += 1
+    if t_grid - passage_end > 1e-6 * dt:
+        ends[count] = passage_end
+        count += 1
+    ends[count] = t_grid
+    return ends[:count + 1], k_end
+
+
+@dataclass(frozen=True)
+class Passages:
+    """The placed passages of one fixed-step run, shared by both stepping paths.
+
+    Attributes
+    ----------
+    placement : ndarray, shape (2,)
+        (c*, g/2) of the method's tableau (:func:`passage_placement`); zeros when no passage is
+        placed.
+    rho_zone : float
+        :data:`FOLD_ZONE` × ρ̂ at the start.
+    indicators : ndarray, shape (2,)
+        The formulation's ρ̂ at its last two projections (updated by them).
+    count : ndarray of int64, shape (1,)
+        Passages placed so far.
+    """
+
+    placement: np.ndarray
+    rho_zone: float
+    indicators: np.ndarray
+    count: np.ndarray
+
+    @classmethod
+    def of(cls, formulation, integrator_class) -> Passages:
+        """The passages of ``formulation`` (its ``passage`` parameter, and ``indicators`` only
+        the ``direct`` correction measures) integrated by ``integrator_class``, placed only
+        for one-step methods with a tableau."""
+        indicators = getattr(formulation, "indicators", None)
+        tableau = getattr(integrator_class, "tableau", None)
+        if indicators is None or tableau is None or not formulation.params.get("passage"):
+            return cls(np.zeros(2), 0.0, np.zeros(2), np.zeros(1, dtype=np.int64))
+        return cls(passage_placement(tableau.c), FOLD_ZONE * float(indicators[0]), indicators,
+                   np.zeros(1, dtype=np.int64))
+
+    @property
+    def arrays(self) -> tuple:
+        """(placement, rho_zone, indicators, count), as :func:`adapters.inhouse.compiled.
+        run_steps` takes them."""
+        return self.placement, self.rho_zone, self.indicators, self.count
+
+    def plan(self, k: int, dt: float, last: int):
+        """The placed steps from grid step ``k`` (:func:`plan_passage`, :func:`passage_times`
+        on the grid t = k·dt ending by step ``last``): (end times (s), grid steps covered), or
+        None for an ordinary step."""
+        if not self.placement[0] > 0.0:
+            return None
+        lead, length = plan_passage(k * dt, dt, last * dt, self.indicators[1],
+                                    self.indicators[0], self.rho_zone, self.placement)
+        if not length > 0.0:
+            return None
+        ends, k_end = passage_times(0.0, dt, k, lead, length)
+        return ends, k_end - k
