@@ -388,16 +388,16 @@ class RK8(NystromIntegrator):
     the accurate end of the front, where a step of 1e-2 s already reaches 1e-9 rad on the seed
     scenes.  The coefficients are SciPy's (``scipy.integrate.DOP853``'s ``C``, ``A``, ``B``).
 
-    Not for singular passages: its twelve stages probe the configuration close to a fold, where
-    the index-1 accelerations grow like the inverse of Φ_q's smallest singular value, and its
-    error there grows as the step shrinks, placed passages (:mod:`adapters.inhouse.fold`) or
-    not.  Measured with ``direct`` (2026-11-25, first 2 s, error of the main output against the
-    verified reference, dt = 1e-2 / 1e-3 / 1e-4 s), plain grid: double_fourbar 7.7e-8 / 3.2e-2 /
-    2.8e-3 m (rk4: 1.0e-7 / 1.5e-11 / 1.5e-10), parallelogram_fourbar 2.9e-10 / 2.3e-7 /
-    diverged at 1.08 s; with placed passages: double_fourbar 1.8e-9 / 1.3e-8 / 3.3e-7,
-    parallelogram_fourbar 4.0e-10 / 2.5e-6 / 1.7e-6.  Away from folds it is the most accurate
-    method per cost (Andrews' squeezer 4.7e-11 at 1e-4 s, where rk4 has 4.7e-6; stiff_fourbar
-    runs at 1e-3 s, where rk4 diverges).
+    Through singular passages its error grows as the step shrinks: its twelve stages probe the
+    configuration close to a fold, where the index-1 accelerations grow like the inverse of
+    Φ_q's smallest singular value.  Measured with ``direct`` (2026-11-25, first 2 s, error of the
+    main output against the verified reference, dt = 1e-2 / 1e-3 / 1e-4 s): on the plain grid
+    with proj_tol 1e-12, double_fourbar 7.7e-8 / 3.2e-2 / 2.8e-3 m (rk4: 1.0e-7 / 1.5e-11 /
+    1.5e-10), parallelogram_fourbar 2.9e-10 / 2.3e-7 / diverged at 1.08 s; with placed passages
+    (:mod:`adapters.inhouse.fold`) and proj_tol 1e-15, double_fourbar 1.1e-10 / 1.0e-10 / 2.6e-10
+    m, parallelogram_fourbar 1.1e-12 / 5.3e-12 / 9.5e-11.  Away from folds it is the most
+    accurate method per cost (Andrews' squeezer 4.7e-11 at 1e-4 s, where rk4 has 4.7e-6;
+    stiff_fourbar runs at 1e-3 s, where rk4 diverges).
     """
 
     name = "rk8"
