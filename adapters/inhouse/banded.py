@@ -158,6 +158,16 @@ def _banded_product(matrix, weights, body_row_start, body_rows, body_columns, po
 
 
 @njit(cache=True)
+def _band_arguments(m, bandwidth):
+    """The scalar arguments of dpbtrf/dpbtrs as the one-element arrays their pointers need:
+    uplo = "L", n = m, kd = bandwidth, nrhs = 1 (``one``), ldab = bandwidth + 1 (``lead``) and
+    ``info``."""
+    return (np.array([ord("L")], dtype=np.uint8), np.array([m], dtype=np.int32),
+            np.array([bandwidth], dtype=np.int32), np.array([bandwidth + 1], dtype=np.int32),
+            np.array([1], dtype=np.int32), np.zeros(1, dtype=np.int32))
+
+
+@njit(cache=True)
 def _banded_factor(matrix, weights, sparsity_arrays):
     """Banded Cholesky of S = A W Aᵀ (rows in the order of ``sparsity_arrays``) with the estimate
     of its 2-norm condition number that :func:`banded_spd_solve` certifies: the largest absolute
@@ -178,12 +188,7 @@ def _banded_factor(matrix, weights, sparsity_arrays):
     m = matrix.shape[0]
     band, norm = _banded_product(matrix, weights, body_row_start, body_rows, body_columns,
                                  position, bandwidth)
-    lower = np.array([ord("L")], dtype=np.uint8)
-    size = np.array([m], dtype=np.int32)
-    kd = np.array([bandwidth], dtype=np.int32)
-    lead = np.array([bandwidth + 1], dtype=np.int32)
-    one = np.array([1], dtype=np.int32)
-    info = np.zeros(1, dtype=np.int32)
+    lower, size, kd, lead, one, info = _band_arguments(m, bandwidth)
     _dpbtrf(lower.ctypes, size.ctypes, kd.ctypes, band.ctypes, lead.ctypes, info.ctypes)
     if info[0] != 0:
         return False, band, np.inf
@@ -215,12 +220,7 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
     positive, band, condition = _banded_factor(matrix, weights, sparsity_arrays)
     if not (positive and CERTIFICATE_MARGIN * cut * condition < 1.0):
         return False, np.empty(0)
-    lower = np.array([ord("L")], dtype=np.uint8)
-    size = np.array([m], dtype=np.int32)
-    kd = np.array([bandwidth], dtype=np.int32)
-    lead = np.array([bandwidth + 1], dtype=np.int32)
-    one = np.array([1], dtype=np.int32)
-    info = np.zeros(1, dtype=np.int32)
+    lower, size, kd, lead, one, info = _band_arguments(m, bandwidth)
     permuted = np.empty(m)
     for r in range(m):
         permuted[position[r]] = rhs[r]
