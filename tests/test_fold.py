@@ -101,7 +101,7 @@ def test_best_converges_through_the_first_two_passages():
     assert errors[1e-2] > errors[1e-3] > errors[1e-4]
 
 
-@pytest.mark.parametrize("method", ["rk4+direct:proj_tol=1e-15", "rk8+direct"])
+@pytest.mark.parametrize("method", ["rk4+direct", "rk8+direct", "rk4+baumgarte", "heun+none"])
 def test_both_paths_place_the_same_passage(method):
     """The compiled loop and the Python path plan the passage at 0.71 s alike and take the same
     steps through it (to the bound of tests/test_compiled_path.py)."""

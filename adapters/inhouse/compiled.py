@@ -213,7 +213,8 @@ def _exception_code(partition):
 def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, partition, limit,
                     passage, counters):
     """One step of the method from (q, q̇) at t to t_new with the ``direct`` correction after it;
-    the new ρ̂ goes to ``passage[2][1]`` (the old one to ``passage[2][0]``) when it is measured.
+    the new ρ̂ goes to ``passage[2][1]`` (the old one to ``passage[2][0]``) when it is measured
+    (``direct`` always, from its projection's Φ_q; ``none`` and ``baumgarte`` with passages on).
 
     Returns
     -------
@@ -229,6 +230,9 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
             q_new, v_new, rho = _project(q_new, v_new, t_new, model[1], proj_tol, proj_max_iter,
                                          cut, model[2], model[4], counters)
             passage[2][0], passage[2][1] = passage[2][1], rho
+        elif stabilisation == PLAIN and passage[0][0] > 0.0:  # ρ̂ needs Φ_q at the step's end
+            passage[2][0], passage[2][1] = passage[2][1], conditioning_indicator(
+                _rows_jacobian(q_new, t_new, model[1], model[2], counters), model[4])
     except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
         return q, v, _exception_code(partition)
     squared_q, squared_v = q_new @ q_new, v_new @ v_new
@@ -269,8 +273,8 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
     limit : float
         Divergence limit on the 2-norms of q and q̇.
     passage : tuple (placement (2,), rho_zone, indicators (2,), count (1,) int64)
-        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; ``direct`` only,
-        zero placement turns them off): (c*, g/2) of the tableau, :data:`~adapters.inhouse.fold.
+        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; not for
+        partitioning, zero placement turns them off): (c*, g/2) of the tableau, :data:`~adapters.inhouse.fold.
         FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid points (updated in place) and the
         number of passages placed (incremented in place).
     counters : ndarray of int64, shape (4,)

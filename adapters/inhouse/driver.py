@@ -22,7 +22,7 @@ from adapters.inhouse.fold import Passages
 from adapters.inhouse.kinematics import common_start
 from adapters.inhouse.stabilisation import Formulation
 from adapters.inhouse.states import body_states
-from adapters.integrators import RUNNING, SecondOrderSystem, make_integrator
+from adapters.integrators import RUNNING, make_integrator
 from harness.model import Mechanism
 from harness.trajectory import BodyStates
 
@@ -93,8 +93,7 @@ class InhouseStepper(FormulationStepper):
         self.integrator = None
         self._restart(0.0, q0, v0)
         self._adaptive = self.integrator.adaptive
-        corrects = type(formulation).project is not SecondOrderSystem.project
-        self._project_samples = self._adaptive and corrects
+        self._project_samples = self._adaptive and formulation.corrects
         if self._project_samples:
             self.notes.append(PROJECTED_SAMPLES_NOTE)
         self._repartition_due = False

@@ -22,8 +22,9 @@ of Φ_q, linear in the distance to the crossing) at the last two step ends, and 
 each a step of the method followed by the formulation's projection.  The three replace the grid
 steps they cover; a passage that would cover a sample time is shortened to end there (or, with
 no room for half a step, not placed).  The state is read only at grid times, so the samples are
-those of a run on the grid.  Used by the ``direct`` correction with the fixed-step one-step
-methods, on both stepping paths (the same plan from the same numbers, so the same steps).
+those of a run on the grid.  Used by the ``none``, ``baumgarte`` and ``direct`` strategies with
+the fixed-step one-step methods, on both stepping paths (the same plan from the same numbers, so
+the same steps); ``passage=0`` turns it off.
 
 Measured on double_fourbar (``best`` = rk4+direct, proj_tol 1e-15; tip error against its
 one-degree-of-freedom model, m; dt = 1e-2 / 1e-3 / 1e-4 / 1e-5 s):
@@ -37,8 +38,13 @@ one-degree-of-freedom model, m; dt = 1e-2 / 1e-3 / 1e-4 / 1e-5 s):
   after a passage becomes the ~1e-10 floor of the 10 s runs.
 
 Per step it costs the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ (banded from
-:data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows): rk4+direct 18.2 → 18.8 µs on fourbar,
-55.3 → 56.9 µs on slider_crank (benchmarks/step_cost.py).
+:data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows), and for ``none`` and ``baumgarte`` the
+Φ_q it needs: rk4+direct 18.2 → 18.8 µs on fourbar, 55.3 → 56.9 µs on slider_crank
+(benchmarks/step_cost.py, before and after); rk4+baumgarte with passage=0 / 1 in one run
+(bare loop, dt 1e-3): 18.1 / 19.4 µs on fourbar, 53.1 / 57.9 µs on slider_crank.
+Measured with ``default`` (rk4+baumgarte) over double_fourbar's first 2 s at dt 1e-2 / 1e-3 /
+1e-4 s: 3.0e-6 / 2.9e-10 / 7.0e-11 m placed, 3.0e-6 / 3.0e-10 / 3.0e-8 m on the plain grid
+(parallelogram_fourbar: 3.3e-6 / 3.0e-10 / 1.8e-11 against 3.2e-6 / 3.0e-10 / 2.3e-4).
 """
 
 from __future__ import annotations
@@ -162,12 +168,14 @@ class Passages:
 
     @classmethod
     def of(cls, formulation, integrator_class) -> Passages:
-        """The passages of ``formulation`` (its ``passage`` parameter, and ``indicators`` only
-        the ``direct`` correction measures) integrated by ``integrator_class``, placed only
-        for one-step methods with a tableau."""
-        indicators = getattr(formulation, "indicators", None)
+        """The passages of ``formulation`` (those whose strategy keeps ``indicators``)
+        integrated by ``integrator_class``, placed only for one-step methods with a tableau; for
+        other methods the formulation stops measuring ρ̂ (its ``indicators`` become None)."""
+        indicators = formulation.indicators
         tableau = getattr(integrator_class, "tableau", None)
-        if indicators is None or tableau is None or not formulation.params.get("passage"):
+        if tableau is None:
+            formulation.indicators = None
+        if indicators is None or tableau is None:
             return cls(np.zeros(2), 0.0, np.zeros(2), np.zeros(1, dtype=np.int64))
         return cls(passage_placement(tableau.c), FOLD_ZONE * float(indicators[0]), indicators,
                    np.zeros(1, dtype=np.int64))

@@ -92,6 +92,30 @@ class Formulation(SecondOrderSystem):
                     "dropped; the reaction split among the redundant joints is not unique")
             self.notes.append(f"{len(dropped)} redundant equation(s) ({labels}) {what}")
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
+        self.indicators = None
+        if self.places_passages and self.params["passage"]:
+            start = conditioning_indicator(
+                np.ascontiguousarray(self.constraints.jacobian(q0, 0.0)[self.rows]),
+                self.constraints.sparsity.arrays)
+            self.indicators = np.array([start, start])
+
+    #: Whether :meth:`project` changes the state (dense output between steps is then projected
+    #: before it is read, :class:`~adapters.inhouse.driver.InhouseStepper`).
+    corrects = False
+    #: Whether the strategy measures the conditioning indicator ρ̂ at every step end for the
+    #: placed passages of singular positions (:mod:`adapters.inhouse.fold`; its parameter
+    #: ``passage``: 1 places them, 0 steps the plain grid): ``indicators`` then holds ρ̂ at the
+    #: last two step ends (both ρ̂ at the start before the first), else it is None (also set so
+    #: by :meth:`Passages.of <adapters.inhouse.fold.Passages.of>` for an integrator that cannot
+    #: place passages).
+    places_passages = False
+
+    def _record_indicator(self, jac):
+        """Shift ``indicators`` and put ρ̂ of ``jac`` (Φ_q on the kept rows, C-contiguous) last;
+        nothing when no indicator is kept."""
+        if self.indicators is not None:
+            self.indicators[0], self.indicators[1] = self.indicators[1], conditioning_indicator(
+                jac, self.constraints.sparsity.arrays)
 
     # -- constraint pieces on the independent rows ------------------------------------------
     def jacobian(self, t, q):
@@ -165,16 +189,29 @@ class Formulation(SecondOrderSystem):
         """Choose the integrated coordinates again at q_full (partitioning only)."""
 
 
-class NoStabilisation(Formulation):
+class _Unprojected(Formulation):
+    """A strategy that leaves the state as the step made it; with placed passages on it
+    evaluates Φ_q at each step end for ρ̂ (:attr:`Formulation.places_passages`)."""
+
+    places_passages = True
+    defaults = {"passage": 1}
+
+    def project(self, t, q, v):
+        if self.indicators is not None:
+            self._record_indicator(np.ascontiguousarray(self.jacobian(t, q)))
+        return q, v
+
+
+class NoStabilisation(_Unprojected):
     name = "none"
     description = "augmented Lagrange-multiplier form, no stabilisation (002 eq. 77)"
 
 
-class Baumgarte(Formulation):
+class Baumgarte(_Unprojected):
     name = "baumgarte"
     description = ("Baumgarte: γ − 2αΦ̇ − β²Φ (002 eq. 110); auto=true uses α = 1/Δt, "
                    "β = √2/Δt (eq. 111)")
-    defaults = {"alpha": 5.0, "beta": 5.0, "auto": False}
+    defaults = {**_Unprojected.defaults, "alpha": 5.0, "beta": 5.0, "auto": False}
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
@@ -258,6 +295,7 @@ class _Projection(Formulation):
     """
 
     defaults = {"proj_tol": 1e-12, "proj_max_iter": 10, "singular_cut": 5e-2}
+    corrects = True
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
@@ -292,15 +330,8 @@ class _Projection(Formulation):
 
 
 class DirectCorrection(_Projection):
-    """Position (002 eq. 127) and velocity (eq. 137) projection after every step.
-
-    Every projection also measures the conditioning indicator ρ̂ of the corrected configuration
-    (:func:`~adapters.inhouse.banded.conditioning_indicator`, from the velocity projection's
-    Φ_q): ``indicators`` holds it at the last two projections (both ρ̂ at the start before the
-    first), the input of the placed passages of singular positions (:mod:`adapters.inhouse.fold`;
-    parameter ``passage``: 1 places them, 0 steps the plain grid) that the fixed-step one-step
-    methods take.
-    """
+    """Position (002 eq. 127) and velocity (eq. 137) projection after every step; ρ̂ for the
+    placed passages comes from the velocity projection's Φ_q (no evaluation of its own)."""
 
     name = "direct"
     description = "direct violation correction: position (002 eq. 127) and velocity (eq. 137) projection"
@@ -309,21 +340,13 @@ class DirectCorrection(_Projection):
     #: placed passages; 7.8e-9 m at 1e-15) and rk5 5.3e-2 m (plain grid), at no measurable cost
     #: on fourbar and slider_crank (rk5 and rk8 at dt 1e-2 and 1e-3, bare loop, within ±3 %).
     defaults = {**_Projection.defaults, "proj_tol": 1e-15, "passage": 1}
-
-    def __init__(self, mech, q0, dt, **params):
-        super().__init__(mech, q0, dt, **params)
-        start = conditioning_indicator(
-            np.ascontiguousarray(self.constraints.jacobian(q0, 0.0)[self.rows]),
-            self.constraints.sparsity.arrays)
-        self.indicators = np.array([start, start])
+    places_passages = True
 
     def project(self, t, q, v):
         q = self.project_position(t, q)
         jac = np.ascontiguousarray(self.jacobian(t, q))
-        sparsity = self.constraints.sparsity
-        self.indicators[0], self.indicators[1] = self.indicators[1], conditioning_indicator(
-            jac, sparsity.arrays)
-        return q, v - self._min_norm(jac, pattern_matvec(jac, sparsity.row_columns, v))
+        self._record_indicator(jac)
+        return q, v - self._min_norm(jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v))
 
 
 class GeometricElimination(_Projection):
