@@ -42,9 +42,10 @@ Per step it costs the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ (ban
 Φ_q it needs: rk4+direct 18.2 → 18.8 µs on fourbar, 55.3 → 56.9 µs on slider_crank
 (benchmarks/step_cost.py, before and after); rk4+baumgarte with passage=0 / 1 in one run
 (bare loop, dt 1e-3): 18.1 / 19.4 µs on fourbar, 53.1 / 57.9 µs on slider_crank.
-Measured with ``default`` (rk4+baumgarte) over double_fourbar's first 2 s at dt 1e-2 / 1e-3 /
-1e-4 s: 3.0e-6 / 2.9e-10 / 7.0e-11 m placed, 3.0e-6 / 3.0e-10 / 3.0e-8 m on the plain grid
-(parallelogram_fourbar: 3.3e-6 / 3.0e-10 / 1.8e-11 against 3.2e-6 / 3.0e-10 / 2.3e-4).
+Measured with ``default`` (rk4+baumgarte) in the ``hard`` campaign (first 2 s, main output
+against the reference, dt 1e-2 / 1e-3 / 1e-4 s): double_fourbar 3.0e-6 / 2.9e-10 / 1.9e-12 m
+placed, 3.0e-6 / 3.0e-10 / 3.0e-8 m on the plain grid; parallelogram_fourbar 3.3e-6 / 3.0e-10 /
+1.8e-11 against 3.2e-6 / 3.0e-10 / 2.3e-4.
 """
 
 from __future__ import annotations
