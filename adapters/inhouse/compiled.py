@@ -274,9 +274,9 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         Divergence limit on the 2-norms of q and q̇.
     passage : tuple (placement (2,), rho_zone, indicators (2,), count (1,) int64)
         Placed passages of singular positions (:mod:`adapters.inhouse.fold`; not for
-        partitioning, zero placement turns them off): (c*, g/2) of the tableau, :data:`~adapters.inhouse.fold.
-        FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid points (updated in place) and the
-        number of passages placed (incremented in place).
+        partitioning, zero placement turns them off): (c*, g/2) of the tableau,
+        :data:`~adapters.inhouse.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
+        points (updated in place) and the number of passages placed (incremented in place).
     counters : ndarray of int64, shape (4,)
         Incremented in place (:data:`RHS_EVALS` …).
 
@@ -307,7 +307,7 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         if placement[0] > 0.0:
             lead, length = plan_passage(t, dt, t0 + last * dt, indicators[1], indicators[0],
                                         rho_zone, placement)
-        if length > 0.0:
+        if length > 0.0:  # a placed passage; an ordinary step below, without its array of ends
             ends, k_end = passage_times(t0, dt, k, lead, length)
             q_new, v_new, t_start = q, v, t
             for t_end in ends:
