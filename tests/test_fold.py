@@ -20,11 +20,11 @@ RK4 = passage_placement(integrator_class("rk4").tableau.c)
 
 
 def test_placement_is_the_middle_of_the_widest_stage_gap():
-    np.testing.assert_array_equal(RK4, [0.25, 0.25])  # stages at 0, 1/2, 1/2, 1
-    fraction, clearance = passage_placement(integrator_class("rk8").tableau.c)
+    np.testing.assert_array_equal(RK4, [0.25, 0.25, SAFE_INDICATOR])  # stages 0, 1/2, 1/2, 1
+    fraction, half_gap, _ = passage_placement(integrator_class("rk8").tableau.c)
     # DOP853's widest gap runs from c = 1/3 to 0.6 (the others are at most 0.21 wide).
     assert fraction == pytest.approx((1 / 3 + 0.6) / 2)
-    assert clearance == pytest.approx((0.6 - 1 / 3) / 2)
+    assert half_gap == pytest.approx((0.6 - 1 / 3) / 2)
 
 
 def test_no_passage_away_from_a_crossing():
@@ -101,7 +101,24 @@ def test_best_converges_through_the_first_two_passages():
     assert errors[1e-2] > errors[1e-3] > errors[1e-4]
 
 
-@pytest.mark.parametrize("method", ["rk4+direct", "rk8+direct", "rk4+baumgarte", "heun+none"])
+def test_partition_passes_the_first_two_crossings():
+    """rk4+partition over the same 1.5 s.  Measured tip errors at dt = 1e-2, 1e-3, 1e-4 s:
+    5.80e-8, 6.02e-11, 6.31e-11 m with passages (1e-5: 1.15e-10; 8.1e-11 at 1e-3 on the Python
+    path), 5.81e-8, 4.29e-9, 1.13e-5 m on the plain grid (1e-5: 2.6e-6).  The floor of ~6e-11 m
+    is the same at clearances 1e-3, 3e-3 and 1e-2, and 8e-10 m at the index-1 strategies' 1e-4
+    (:attr:`CoordinatePartitioning.passage_clearance`).  Bounds ≈ 3–5× the measured values."""
+    errors = {}
+    for dt in (1e-2, 1e-3, 1e-4):
+        errors[dt], run = _tip_error("rk4+partition", dt, 1.5)
+        assert run.status == "ok"
+        assert run.counters["passages"] >= 2
+    assert errors[1e-2] <= 2e-7
+    assert errors[1e-3] <= 3e-10 and errors[1e-4] <= 3e-10
+    assert errors[1e-2] > errors[1e-3]
+
+
+@pytest.mark.parametrize("method", ["rk4+direct", "rk8+direct", "rk4+baumgarte", "heun+none",
+                                    "rk4+partition"])
 def test_both_paths_place_the_same_passage(method):
     """The compiled loop and the Python path plan the passage at 0.71 s alike and take the same
     steps through it (to the bound of tests/test_compiled_path.py)."""

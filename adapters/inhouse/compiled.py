@@ -182,17 +182,21 @@ def _combine(q_out, v_out, q, v, stages, velocity_weight, h2, position_weights, 
 
 
 @njit(cache=True)
-def split_check(q_ind, v_ind, t, rows, constraint_args, partition, counters):
+def split_check(q_ind, v_ind, t, model, partition, passage, counters):
     """The re-partition check of the Python path (``needs_repartition`` on the expanded state):
     RUNNING to keep the split, REPARTITION when the dependent block is ``cond_ratio`` times worse
-    conditioned than the split full pivoting picks, FAILED_RANK when Φ_q lost rank."""
-    dependent = partition[1]
+    conditioned than the split full pivoting picks, FAILED_RANK when Φ_q lost rank.  With placed
+    passages on, ρ̂ of the Φ_q it factors goes to ``passage[2][1]`` (the old one to
+    ``passage[2][0]``)."""
+    rows, constraint_args, dependent = model[1], model[2], partition[1]
     q, _ = expand(q_ind, v_ind, t, rows, constraint_args, partition, counters)
     jac = _rows_jacobian(q, 0.0, rows, constraint_args, counters)
     rank, pivots = full_pivot_elimination(jac.T)
     if rank < jac.shape[0]:
         partition[8][1] = rank
         return FAILED_RANK
+    if passage[0][0] > 0.0:
+        passage[2][0], passage[2][1] = passage[2][1], conditioning_indicator(jac, model[4])
     best = np.sort(pivots)
     if best.shape[0] == dependent.shape[0] and np.all(best == dependent):
         return RUNNING
@@ -273,8 +277,8 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
     limit : float
         Divergence limit on the 2-norms of q and q̇.
     passage : tuple (placement (2,), rho_zone, indicators (2,), count (1,) int64)
-        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; not for
-        partitioning, zero placement turns them off): (c*, g/2) of the tableau,
+        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; zero placement
+        turns them off): (c*, g/2) of the tableau and the formulation's clearance,
         :data:`~adapters.inhouse.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
         points (updated in place) and the number of passages placed (incremented in place).
     counters : ndarray of int64, shape (4,)
@@ -290,14 +294,13 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         :data:`RUNNING` when step ``last`` was reached, :data:`REPARTITION` when the split must
         be chosen again before step ``done + 1``, else the code of the failure in that step.
     """
-    rows, constraint_args = model[1], model[2]
     placement, rho_zone, indicators, passages = passage
     k = first
     while k < last:
         t = t0 + k * dt
         if stabilisation == PARTITIONED and check_due[0]:
             try:
-                verdict = split_check(q, v, t, rows, constraint_args, partition, counters)
+                verdict = split_check(q, v, t, model, partition, passage, counters)
             except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
                 return q, v, k, _exception_code(partition)
             if verdict != RUNNING:

@@ -22,9 +22,11 @@ of Φ_q, linear in the distance to the crossing) at the last two step ends, and 
 each a step of the method followed by the formulation's projection.  The three replace the grid
 steps they cover; a passage that would cover a sample time is shortened to end there (or, with
 no room for half a step, not placed).  The state is read only at grid times, so the samples are
-those of a run on the grid.  Used by the ``none``, ``baumgarte`` and ``direct`` strategies with
-the fixed-step one-step methods, on both stepping paths (the same plan from the same numbers, so
-the same steps); ``passage=0`` turns it off.
+those of a run on the grid.  Used by the ``none``, ``baumgarte``, ``direct`` and ``partition``
+strategies with the fixed-step one-step methods, on both stepping paths (the same plan from the
+same numbers, so the same steps); ``passage=0`` turns it off.  Coordinate partitioning measures ρ̂
+in its re-partition check after each step and keeps its stages farther away (its own clearance,
+:attr:`~adapters.inhouse.partition.CoordinatePartitioning.passage_clearance`).
 
 Measured on double_fourbar (``best`` = rk4+direct, proj_tol 1e-15; tip error against its
 one-degree-of-freedom model, m; dt = 1e-2 / 1e-3 / 1e-4 / 1e-5 s):
@@ -66,14 +68,14 @@ FOLD_ZONE = 0.1
 SAFE_INDICATOR = 1e-4
 
 
-def passage_placement(c: np.ndarray) -> np.ndarray:
-    """(c*, g/2): the middle of the widest gap g between the sorted distinct stage times c (s,)
-    and 1 (the first widest one), and the clearance from it to the nearest stage time, as
-    fractions of the step; shape (2,)."""
+def passage_placement(c: np.ndarray, clearance: float = SAFE_INDICATOR) -> np.ndarray:
+    """(c*, g/2, clearance): the middle of the widest gap g between the sorted distinct stage
+    times c (s,) and 1 (the first widest one) and the distance from it to the nearest stage time,
+    as fractions of the step, and the ρ̂-distance the passage keeps its stages at; shape (3,)."""
     times = np.unique(np.append(np.asarray(c, dtype=float), [0.0, 1.0]))
     gaps = np.diff(times)
     widest = int(np.argmax(gaps))
-    return np.array([times[widest] + gaps[widest] / 2, gaps[widest] / 2])
+    return np.array([times[widest] + gaps[widest] / 2, gaps[widest] / 2, clearance])
 
 
 @njit(cache=True)
@@ -93,15 +95,15 @@ def plan_passage(t, dt, t_last, rho, rho_previous, rho_zone, placement):
         ρ̂ at t and at the grid point before.
     rho_zone : float
         :data:`FOLD_ZONE` × ρ̂ at the start.
-    placement : ndarray, shape (2,)
-        (c*, g/2) of the tableau (:func:`passage_placement`).
+    placement : ndarray, shape (3,)
+        (c*, g/2) of the tableau and the clearance (:func:`passage_placement`).
     """
-    fraction, clearance = placement[0], placement[1]
+    fraction, half_gap, clearance = placement[0], placement[1], placement[2]
     if not (0.0 < rho < rho_previous and rho < rho_zone):
         return 0.0, 0.0
     rate = (rho_previous - rho) / dt
     lead_time = rho / rate
-    length = max(dt, SAFE_INDICATOR / (clearance * rate))
+    length = max(dt, clearance / (half_gap * rate))
     if lead_time > fraction * length + dt:
         return 0.0, 0.0  # the crossing is more than a step beyond the passage's start
     if lead_time < fraction * length:  # too close to centre a full passage: a shorter one
@@ -151,9 +153,9 @@ class Passages:
 
     Attributes
     ----------
-    placement : ndarray, shape (2,)
-        (c*, g/2) of the method's tableau (:func:`passage_placement`); zeros when no passage is
-        placed.
+    placement : ndarray, shape (3,)
+        (c*, g/2) of the method's tableau and the formulation's clearance
+        (:func:`passage_placement`); zeros when no passage is placed.
     rho_zone : float
         :data:`FOLD_ZONE` × ρ̂ at the start.
     indicators : ndarray, shape (2,)
@@ -177,8 +179,8 @@ class Passages:
         if tableau is None:
             formulation.indicators = None
         if indicators is None or tableau is None:
-            return cls(np.zeros(2), 0.0, np.zeros(2), np.zeros(1, dtype=np.int64))
-        return cls(passage_placement(tableau.c), FOLD_ZONE * float(indicators[0]), indicators,
+            return cls(np.zeros(3), 0.0, np.zeros(2), np.zeros(1, dtype=np.int64))
+        return cls(passage_placement(tableau.c, formulation.passage_clearance), FOLD_ZONE * float(indicators[0]), indicators,
                    np.zeros(1, dtype=np.int64))
 
     @property

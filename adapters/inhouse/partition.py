@@ -33,8 +33,20 @@ class CoordinatePartitioning(Formulation):
     description = ("coordinate partitioning (002 eq. 78–89): integrate the independent "
                    "coordinates, solve the dependent ones by Newton; re-partition when the "
                    "dependent block is cond_ratio times worse conditioned than the best split")
-    defaults = {"newton_tol": 1e-13, "newton_max_iter": 20, "cond_ratio": 1.01}
+    defaults = {"newton_tol": 1e-13, "newton_max_iter": 20, "cond_ratio": 1.01, "passage": 1}
     keeps_redundant_rows = False
+    #: Passages of singular positions are placed (:mod:`adapters.inhouse.fold`; ρ̂ is measured on
+    #: the Φ_q of the re-partition check, with every row kept only: a start that dropped
+    #: redundant rows places none).  At a crossing every dependent block is singular, so the
+    #: reduced equations lose accuracy near it like the index-1 ones do.  The clearance is
+    #: chosen on double_fourbar (first 1.5 s, tip error at dt 1e-3 / 1e-4 / 1e-5 s): 1e-4 gave
+    #: 7.9e-10 / 8.2e-10 / 6.0e-10 m, 1e-3 gave 6.0e-11 / 6.3e-11 / 9.3e-11 m, 3e-3 and 1e-2 the
+    #: same ~6e-11 floor (plain grid: 4.3e-9 / 1.1e-5 / 2.6e-6 m).  On parallelogram_fourbar (10 s,
+    #: dt 1e-2 / 1e-3 / 1e-4 s) 1e-3 gave 1.3e-7 / 3.7e-8 / 5.8e-7, 1e-4 gave 1.3e-7 / 1.2e-7 /
+    #: 4.7e-7, the plain grid 4.4e-5 / 2.0e-5 / 3.9e-3: the error still grows at each of its 12
+    #: crossings there (``direct``: 3e-11), for a reason not found yet.
+    places_passages = True
+    passage_clearance = 1e-3
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
@@ -62,8 +74,10 @@ class CoordinatePartitioning(Formulation):
 
     def needs_repartition(self, q_full: np.ndarray) -> bool:
         """True when cond(Φ_qD) of the current split exceeds ``cond_ratio`` × that of the split
-        full pivoting would choose at q_full."""
+        full pivoting would choose at q_full; ρ̂ of Φ_q there is recorded for the placed
+        passages (the compiled loop's ``split_check`` does the same)."""
         best, jac = self._best_split(q_full)
+        self._record_indicator(jac)
         if np.array_equal(best, self.dependent):
             return False
         current = np.linalg.cond(jac[:, self.dependent])

@@ -31,6 +31,7 @@ from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
 from adapters.inhouse.banded import conditioning_indicator, min_norm_correction, pattern_matvec
+from adapters.inhouse.fold import SAFE_INDICATOR
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
 from harness.model import Mechanism
@@ -93,7 +94,7 @@ class Formulation(SecondOrderSystem):
             self.notes.append(f"{len(dropped)} redundant equation(s) ({labels}) {what}")
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
         self.indicators = None
-        if self.places_passages and self.params["passage"]:
+        if self.places_passages and self.params["passage"] and self.rows.size == self.constraints.m:
             start = conditioning_indicator(
                 np.ascontiguousarray(self.constraints.jacobian(q0, 0.0)[self.rows]),
                 self.constraints.sparsity.arrays)
@@ -109,6 +110,9 @@ class Formulation(SecondOrderSystem):
     #: by :meth:`Passages.of <adapters.inhouse.fold.Passages.of>` for an integrator that cannot
     #: place passages).
     places_passages = False
+    #: The ρ̂-distance from a crossing that a placed passage keeps its stages at
+    #: (:data:`~adapters.inhouse.fold.SAFE_INDICATOR` for the index-1 strategies).
+    passage_clearance = SAFE_INDICATOR
 
     def _record_indicator(self, jac):
         """Shift ``indicators`` and put ρ̂ of ``jac`` (Φ_q on the kept rows, C-contiguous) last;
