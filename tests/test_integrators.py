@@ -381,7 +381,7 @@ def test_bad_arguments_are_named(argument, value, match):
 
 def test_parameter_listing_and_step_kind():
     assert len(integrator_names()) == 27
-    assert integrator_params("bdf4") == {"divergence_limit": 1e8, "tol": 1e-5, "max_iter": 10}
+    assert integrator_params("bdf4") == {"divergence_limit": 1e8, "tol": 1e-10, "max_iter": 10}
     assert integrator_params("am3")["tol"] == 1e-10
     assert integrator_params("rk45") == {"divergence_limit": 1e8, "rtol": 1e-6, "atol": 1e-9,
                                          "max_step": np.inf, "min_step_ratio": 1e-5}
