@@ -94,6 +94,22 @@ def test_inhouse_best_stays_on_the_parallelogram_branch(parallelogram):
                   - output_series(parallelogram, ref, "crank_angle")).max() <= 1e-9
 
 
+def test_bdf4_stops_at_the_first_passage_and_says_why(parallelogram):
+    """Multistep methods get no placed passages: bdf4+direct (Newton to its default 1e-10)
+    fails at the first flattened position (0.538 s) instead of crossing it inaccurately.
+    Measured at dt 1e-3 s: failed at 0.537 s, crank angle within 4.3e-10 rad of the reference
+    before it; at the seed's tol=1e-5 it ran through as ``ok``, 1.3e-6 rad off over this 1 s
+    (6.3e-6 rad over the hard campaign's 2 s, 1.9e-5 rad there at dt 1e-4 s).  Bound on the
+    error before the failure: 1e-8 rad (23×)."""
+    reference = reference_trajectory(parallelogram)
+    case = run_case(get_adapter("inhouse"), parallelogram, "bdf4+direct", 1e-3, 1.0, reference)
+    run = case.trajectory
+    assert run.status == "failed"
+    assert "singular configuration" in run.reason
+    assert 0.52 <= run.failure_time <= 0.538
+    assert case.metrics["output_errors"]["crank_angle"] <= 1e-8
+
+
 def crank_acceleration(mech, theta: float, rate: float) -> float:
     """θ̈ (rad/s²) of the driver's body at driver angle ``theta`` (rad) and rate (rad/s)."""
     states = assemble(mech, theta, rate).states
