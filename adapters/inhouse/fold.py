@@ -180,8 +180,8 @@ class Passages:
             formulation.indicators = None
         if indicators is None or tableau is None:
             return cls(np.zeros(3), 0.0, np.zeros(2), np.zeros(1, dtype=np.int64))
-        return cls(passage_placement(tableau.c, formulation.passage_clearance), FOLD_ZONE * float(indicators[0]), indicators,
-                   np.zeros(1, dtype=np.int64))
+        return cls(passage_placement(tableau.c, formulation.passage_clearance),
+                   FOLD_ZONE * float(indicators[0]), indicators, np.zeros(1, dtype=np.int64))
 
     @property
     def arrays(self) -> tuple:

@@ -44,7 +44,10 @@ class CoordinatePartitioning(Formulation):
     #: same ~6e-11 floor (plain grid: 4.3e-9 / 1.1e-5 / 2.6e-6 m).  On parallelogram_fourbar (10 s,
     #: dt 1e-2 / 1e-3 / 1e-4 s) 1e-3 gave 1.3e-7 / 3.7e-8 / 5.8e-7, 1e-4 gave 1.3e-7 / 1.2e-7 /
     #: 4.7e-7, the plain grid 4.4e-5 / 2.0e-5 / 3.9e-3: the error still grows at each of its 12
-    #: crossings there (``direct``: 3e-11), for a reason not found yet.
+    #: crossings there (``direct``: 3e-11).  Each passage of that bifurcation adds an energy
+    #: error (dt 1e-4 s: 1.2e-10 J at the first, 1.3e-9 J after the second; ``direct`` ~2e-13 J)
+    #: that the motion turns into a crank-angle error growing between crossings; why partition's
+    #: step does that there is not found yet.
     places_passages = True
     passage_clearance = 1e-3
 
