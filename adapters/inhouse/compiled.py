@@ -276,7 +276,7 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         Whether the split is checked before the next step; updated in place.
     limit : float
         Divergence limit on the 2-norms of q and q̇.
-    passage : tuple (placement (2,), rho_zone, indicators (2,), count (1,) int64)
+    passage : tuple (placement (3,), rho_zone, indicators (2,), count (1,) int64)
         Placed passages of singular positions (:mod:`adapters.inhouse.fold`; zero placement
         turns them off): (c*, g/2) of the tableau and the formulation's clearance,
         :data:`~adapters.inhouse.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid

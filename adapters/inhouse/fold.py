@@ -159,7 +159,7 @@ class Passages:
     rho_zone : float
         :data:`FOLD_ZONE` × ρ̂ at the start.
     indicators : ndarray, shape (2,)
-        The formulation's ρ̂ at its last two projections (updated by them).
+        The formulation's ρ̂ at its last two step ends (updated as it measures them).
     count : ndarray of int64, shape (1,)
         Passages placed so far.
     """

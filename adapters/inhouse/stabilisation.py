@@ -94,7 +94,8 @@ class Formulation(SecondOrderSystem):
             self.notes.append(f"{len(dropped)} redundant equation(s) ({labels}) {what}")
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
         self.indicators = None
-        if self.places_passages and self.params["passage"] and self.rows.size == self.constraints.m:
+        every_row = self.rows.size == self.constraints.m
+        if self.places_passages and self.params["passage"] and every_row:
             start = conditioning_indicator(
                 np.ascontiguousarray(self.constraints.jacobian(q0, 0.0)[self.rows]),
                 self.constraints.sparsity.arrays)
@@ -108,7 +109,8 @@ class Formulation(SecondOrderSystem):
     #: ``passage``: 1 places them, 0 steps the plain grid): ``indicators`` then holds ρ̂ at the
     #: last two step ends (both ρ̂ at the start before the first), else it is None (also set so
     #: by :meth:`Passages.of <adapters.inhouse.fold.Passages.of>` for an integrator that cannot
-    #: place passages).
+    #: place passages, and kept only when every constraint row enters the solves: ρ̂ of a subset
+    #: of Φ_q's rows says nothing about the whole).
     places_passages = False
     #: The ρ̂-distance from a crossing that a placed passage keeps its stages at
     #: (:data:`~adapters.inhouse.fold.SAFE_INDICATOR` for the index-1 strategies).
