@@ -258,39 +258,48 @@ class NystromIntegrator(Integrator):
         return self.status
 
     def steps_unchecked(self, count: int, rule) -> str:
-        """Up to ``count`` steps by ``rule``, a step rule of this method (:func:`step_rule`) over a
-        right-hand side without the problem's own per-call checks, each new state checked as
-        :meth:`step` checks it.  A step that raises (anything) or whose state fails the check is
-        taken again by :meth:`step`, which fails it with its reason or lets a non-problem error
-        through, as it does (the step's evaluations are then made twice).
-        The same arithmetic as ``count`` calls of :meth:`step` when ``rule``'s right-hand side
-        returns the problem's accelerations; ``nfev`` counts one evaluation per stage.
+        """``count`` steps by ``rule``, a step rule of this method (:func:`step_rule`) over a
+        right-hand side without the problem's own per-call checks, projected as :meth:`step`
+        projects them and checked once, on the last state.
+
+        A finite last state within ``divergence_limit`` keeps all ``count`` steps: the same
+        arithmetic as ``count`` calls of :meth:`step` when ``rule``'s right-hand side returns the
+        problem's accelerations (``nfev`` counts one evaluation per stage).  Otherwise, or when
+        a step raises (anything), the state goes back to where it was and :meth:`step` takes the
+        steps again one by one, failing the first bad one with its reason or letting a
+        non-problem error through, as it does; the evaluations of the replayed steps are then
+        made twice.  NaN and inf carry to the last state, so only a state that leaves the
+        divergence limit and comes back within the ``count`` steps goes unnoticed, where checked
+        steps would have stopped it.  Checking once per call instead of once per step saves two
+        dot products a step (~0.7 µs, an eighth of a Pinocchio symplectic-Euler step).
 
         Returns
         -------
         status : str
             The status after the last step.
         """
-        if self.status != RUNNING:
+        if self.status != RUNNING or count <= 0:
             return self.status
         limit = self.params["divergence_limit"] ** 2
-        project, tableau, stages = self.problem.project, self.tableau, self.tableau.c.size
-        for _ in range(count):
-            t_new = self._target_time()
-            try:
-                q_new, v_new = project(t_new, *rule(self.t, self.q, self.v, t_new - self.t,
-                                                    tableau))
-                q_new, v_new = np.asarray(q_new, dtype=float), np.asarray(v_new, dtype=float)
-                good = float(q_new.dot(q_new)) <= limit and float(v_new.dot(v_new)) <= limit
-            except Exception:  # noqa: BLE001 — replayed by step(), which words or re-raises it
-                good = False
-            if not good:  # NaN fails the comparisons too
+        project, tableau, t0, dt = self.problem.project, self.tableau, self.t0, self.dt
+        t, q, v = self.t, self.q, self.v
+        try:
+            for k in range(self.n_steps + 1, self.n_steps + count + 1):
+                t_new = t0 + k * dt  # as _target_time(): no accumulated drift
+                q, v = project(t_new, *rule(t, q, v, t_new - t, tableau))
+                t = t_new
+            q, v = np.asarray(q, dtype=float), np.asarray(v, dtype=float)
+            good = float(q.dot(q)) <= limit and float(v.dot(v)) <= limit
+        except Exception:  # noqa: BLE001 — replayed by step(), which words or re-raises it
+            good = False
+        if not good:  # NaN fails the comparisons too
+            for _ in range(count):
                 if self.step() != RUNNING:
-                    return self.status
-                continue
-            self.t, self.q, self.v = t_new, q_new, v_new
-            self.n_steps += 1
-            self.nfev += stages
+                    break
+            return self.status
+        self.t, self.q, self.v = t, q, v
+        self.n_steps += count
+        self.nfev += count * tableau.c.size
         return self.status
 
 
