@@ -75,6 +75,11 @@ class ProjectionFailure(ValueError):
     """The position projection did not reach its tolerance."""
 
 
+#: The cost counters of :class:`ConstrainedProblem`, in the order the case row lists them.
+COUNTER_NAMES = ("constraint_dynamics_calls", "proximal_iterations", "max_relative_residual",
+                 "newton_iterations", "jacobian_evals", "projection_factorizations")
+
+
 class ConstrainedProblem:
     """q̈ = a(t, q, v) of a Pinocchio model with loop closures.
 
@@ -87,12 +92,13 @@ class ConstrainedProblem:
     ----------
     n : int
         Number of velocity coordinates (``pm.model.nv``).
-    counters : dict
-        ``constraint_dynamics_calls``, ``proximal_iterations`` (summed), ``max_relative_residual``
-        of the proximal solves, ``newton_iterations`` (Gauss–Newton iterations of the position
-        projection), ``jacobian_evals`` (constraint Jacobians of the projection),
-        ``projection_factorizations`` (pseudo-inverses of the closure Jacobian: one per
-        projection).
+    constraint_dynamics_calls, proximal_iterations : int
+        Calls of ``pin.constraintDynamics`` and their proximal iterations (summed).
+    max_relative_residual : float
+        The largest relative residual of the proximal solves.
+    newton_iterations, jacobian_evals, projection_factorizations : int
+        Gauss–Newton iterations of the position projection, constraint Jacobians of the
+        projection, pseudo-inverses of the closure Jacobian (one per projection).
     """
 
     def __init__(self, pm: PinocchioModel, settings: SolverSettings):
@@ -114,9 +120,16 @@ class ConstrainedProblem:
         # StdVec_RigidConstraint* costs ~3.5 µs per pass, a list ~0.2 µs.
         self._closure_pairs = list(zip(self.constraints, self.kin_cdata))
         self._loads = [force for force in pm.mechanism.forces if _is_load(force, pm)]
-        self.counters = {"constraint_dynamics_calls": 0, "proximal_iterations": 0,
-                         "max_relative_residual": 0.0, "newton_iterations": 0,
-                         "jacobian_evals": 0, "projection_factorizations": 0}
+        # Plain attributes, not a dict: the right-hand side updates three of them per call,
+        # and attribute updates save ~0.07 µs of a symplectic-Euler step's ~5.5 µs.
+        self.constraint_dynamics_calls = self.proximal_iterations = 0
+        self.max_relative_residual = 0.0
+        self.newton_iterations = self.jacobian_evals = self.projection_factorizations = 0
+
+    @property
+    def counters(self) -> dict:
+        """The cost counters (the attributes above) by name."""
+        return {name: getattr(self, name) for name in COUNTER_NAMES}
 
     def _fresh_data(self) -> tuple:
         """A ``pin.Data`` and constraint datas of their own (never shared between algorithms)."""
@@ -157,12 +170,12 @@ class ConstrainedProblem:
         adapter's unchecked steps (:meth:`~adapters.integrators.nystrom.NystromIntegrator.
         steps_unchecked`), whose failing steps :meth:`acceleration` takes again."""
         a = self.engine_acceleration(t, q, v)
-        counters, prox = self.counters, self.prox
-        counters["constraint_dynamics_calls"] += 1
-        counters["proximal_iterations"] += prox.iter
+        prox = self.prox
+        self.constraint_dynamics_calls += 1
+        self.proximal_iterations += prox.iter
         residual = prox.relative_residual
-        if residual > counters["max_relative_residual"]:
-            counters["max_relative_residual"] = residual
+        if residual > self.max_relative_residual:
+            self.max_relative_residual = residual
         return a
 
     def engine_acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -192,7 +205,7 @@ class ConstrainedProblem:
             return q, v
         residual, jacobian = self.closure(q)
         inverse = pseudo_inverse(jacobian)
-        self.counters["projection_factorizations"] += 1
+        self.projection_factorizations += 1
         for iteration in itertools.count():
             worst = np.abs(residual).max()
             if worst <= settings.project_tol:
@@ -200,7 +213,7 @@ class ConstrainedProblem:
             if iteration == settings.project_max_iter:
                 raise ProjectionFailure(f"position projection left a closure residual of "
                                         f"{worst:.3g} m after {iteration} iterations")
-            self.counters["newton_iterations"] += 1
+            self.newton_iterations += 1
             q = pin.integrate(self.model, q, -(inverse @ residual))
             residual, jacobian = self.closure(q)
         return q, v - inverse @ (jacobian @ v)
@@ -221,7 +234,7 @@ class ConstrainedProblem:
         pin.computeJointJacobians(model, data, q)
         for constraint, constraint_data in self._closure_pairs:
             constraint.calc(model, data, constraint_data)
-        self.counters["jacobian_evals"] += 1
+        self.jacobian_evals += 1
         residual = -np.concatenate([d.c1Mc2.translation for _, d in self._closure_pairs])
         return residual, pin.getConstraintsJacobian(model, data, self.constraints, self.kin_cdata)
 
