@@ -12,10 +12,14 @@ The Jacobians are the exact derivatives of these polynomial expressions, valid a
 normalisation manifold, so that they can be checked by finite differences anywhere.  On the
 manifold they equal the seed's −A ũ̄ Ḡ form (002 table 1, eq. 28).
 
-Each function has an ``_into`` form that writes into arrays the caller owns (the compiled kernels
-reuse one scratch buffer per call instead of allocating small arrays per primitive, which was
-most of their cost); the ones the force kernels use also have an allocating form that wraps it
-(:func:`rotate`, :func:`point`, :func:`point_rate`).  All are inlined into their callers
+The compiled kernels take these quantities as tuples (x, y, z) of scalars, not as arrays: a
+helper writing into a scratch array made every row of Φ_q and γ cost several times its arithmetic
+(a spatial slider-crank's γ 2.99 µs, its six DOT_VV rows 1.5 µs of it; the same rows written
+with tuples 0.08 µs), presumably because the compiler must assume that a scratch array may alias
+q and q̇ and so reloads them after every store.  Jacobians are added straight into the rows of
+Φ_q (:func:`add_rotate_jacobian`, :func:`add_point_jacobian`, :func:`add_point_block`).  The force kernels use the
+allocating forms :func:`rotate`, :func:`point` and :func:`point_rate`.
+All are inlined into their callers
 (``inline="always"``): a call of a separately compiled function with array arguments costs more
 than these few flops (its arguments' reference counts, atomic updates, are changed on entry and
 exit).
@@ -34,171 +38,182 @@ SPATIAL_NC = 7
 
 
 @njit(cache=True, inline="always")
-def rotate_into(out, q, nc, body, u):
-    """out[:] = world vector A_b ū, out shape (3,)."""
+def rotate_xyz(q, nc, body, u):
+    """World vector A_b ū as a tuple (x, y, z)."""
     if body < 0:
-        for x in range(3):
-            out[x] = u[x]
-        return
+        return u[0], u[1], u[2]
     k = body * nc
     if nc == PLANAR_NC:
         c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
-        out[0] = c * u[0] - s * u[1]
-        out[1] = s * u[0] + c * u[1]
-        out[2] = u[2]
-        return
+        return c * u[0] - s * u[1], s * u[0] + c * u[1], u[2]
     t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
     a = 2.0 * t0 * t0 - 1.0
-    out[0] = a * u[0] + 2.0 * t1 * dot + 2.0 * t0 * (t2 * u[2] - t3 * u[1])
-    out[1] = a * u[1] + 2.0 * t2 * dot + 2.0 * t0 * (t3 * u[0] - t1 * u[2])
-    out[2] = a * u[2] + 2.0 * t3 * dot + 2.0 * t0 * (t1 * u[1] - t2 * u[0])
+    return (a * u[0] + 2.0 * t1 * dot + 2.0 * t0 * (t2 * u[2] - t3 * u[1]),
+            a * u[1] + 2.0 * t2 * dot + 2.0 * t0 * (t3 * u[0] - t1 * u[2]),
+            a * u[2] + 2.0 * t3 * dot + 2.0 * t0 * (t1 * u[1] - t2 * u[0]))
+
+
+@njit(cache=True, inline="always")
+def _with_origin(x, y, z, coordinates, nc, body):
+    """(x, y, z) plus the body's origin entries of ``coordinates`` (r_b of q, or ṙ_b of q̇);
+    unchanged for the ground (body < 0)."""
+    if body < 0:
+        return x, y, z
+    k = body * nc
+    if nc == SPATIAL_NC:
+        return x + coordinates[k], y + coordinates[k + 1], z + coordinates[k + 2]
+    return x + coordinates[k], y + coordinates[k + 1], z
+
+
+@njit(cache=True, inline="always")
+def point_xyz(q, nc, body, u):
+    """World position r_b + A_b ū of a body point as a tuple (x, y, z)  (002 eq. 1)."""
+    x, y, z = rotate_xyz(q, nc, body, u)
+    return _with_origin(x, y, z, q, nc, body)
 
 
 @njit(cache=True, inline="always")
 def rotate(q, nc, body, u):
     """World vector A_b ū, shape (3,)."""
-    out = np.empty(3)
-    rotate_into(out, q, nc, body, u)
-    return out
-
-
-@njit(cache=True, inline="always")
-def _add_origin(out, coordinates, nc, body):
-    """out[:] += the body's origin entries of ``coordinates`` (r_b of q, or ṙ_b of q̇); nothing
-    for the ground (body < 0)."""
-    if body >= 0:
-        k = body * nc
-        out[0] += coordinates[k]
-        out[1] += coordinates[k + 1]
-        if nc == SPATIAL_NC:
-            out[2] += coordinates[k + 2]
-
-
-@njit(cache=True, inline="always")
-def point_into(out, q, nc, body, u):
-    """out[:] = world position r_b + A_b ū of a body point, out shape (3,)  (002 eq. 1)."""
-    rotate_into(out, q, nc, body, u)
-    _add_origin(out, q, nc, body)
+    return np.array(rotate_xyz(q, nc, body, u))
 
 
 @njit(cache=True, inline="always")
 def point(q, nc, body, u):
     """World position r_b + A_b ū of a body point, shape (3,)  (002 eq. 1)."""
-    out = np.empty(3)
-    point_into(out, q, nc, body, u)
-    return out
+    return np.array(point_xyz(q, nc, body, u))
 
 
 @njit(cache=True, inline="always")
-def rotate_jacobian_into(jac, q, nc, body, u):
-    """jac[:] = ∂(A_b ū)/∂q_b, jac shape (3, nc); translation columns are zero."""
-    jac[:] = 0.0
+def _planar_rotate_column(q, k, u):
+    """∂(A ū)/∂φ = Ω A ū (000 eq. 1.19) of the planar body whose coordinates start at q[k],
+    a tuple (3)."""
+    c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
+    return -s * u[0] - c * u[1], c * u[0] - s * u[1], 0.0
+
+
+@njit(cache=True, inline="always")
+def _spatial_rotate_columns(q, k, u):
+    """∂(A ū)/∂θ0 … ∂(A ū)/∂θ3 of the spatial body whose coordinates start at q[k], four
+    tuples (3): ∂/∂θ0 = 4θ0 ū + 2 θ̄ × ū and ∂/∂θk = 2 e_k (θ̄·ū) + 2 θ̄ ū_k + 2 θ0 (e_k × ū)."""
+    t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
+    dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
+    return ((4.0 * t0 * u[0] + 2.0 * (t2 * u[2] - t3 * u[1]),
+             4.0 * t0 * u[1] + 2.0 * (t3 * u[0] - t1 * u[2]),
+             4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0])),
+            (2.0 * t1 * u[0] + 2.0 * dot, 2.0 * t2 * u[0] - 2.0 * t0 * u[2],
+             2.0 * t3 * u[0] + 2.0 * t0 * u[1]),
+            (2.0 * t1 * u[1] + 2.0 * t0 * u[2], 2.0 * t2 * u[1] + 2.0 * dot,
+             2.0 * t3 * u[1] - 2.0 * t0 * u[0]),
+            (2.0 * t1 * u[2] - 2.0 * t0 * u[1], 2.0 * t2 * u[2] + 2.0 * t0 * u[0],
+             2.0 * t3 * u[2] + 2.0 * dot))
+
+
+@njit(cache=True, inline="always")
+def add_rotate_jacobian(jac, r, q, nc, body, u, w, sign):
+    """jac[r, body's columns] += sign · wᵀ ∂(A_b ū)/∂q_b, w a tuple (3); nothing for the ground
+    and nothing on the translation columns."""
     if body < 0:
         return
     k = body * nc
     if nc == PLANAR_NC:
-        c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
-        jac[0, 2] = -s * u[0] - c * u[1]
-        jac[1, 2] = c * u[0] - s * u[1]
+        column = _planar_rotate_column(q, k, u)
+        jac[r, k + 2] += sign * (w[0] * column[0] + w[1] * column[1])
         return
-    t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
-    dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
-    # ∂/∂θ0 = 4θ0 ū + 2 θ̄ × ū
-    jac[0, 3] = 4.0 * t0 * u[0] + 2.0 * (t2 * u[2] - t3 * u[1])
-    jac[1, 3] = 4.0 * t0 * u[1] + 2.0 * (t3 * u[0] - t1 * u[2])
-    jac[2, 3] = 4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0])
-    # ∂/∂θk = 2 e_k (θ̄·ū) + 2 θ̄ ū_k + 2 θ0 (e_k × ū)
-    tb = (t1, t2, t3)
-    for col in range(3):
-        for row in range(3):
-            jac[row, 4 + col] = 2.0 * tb[row] * u[col]
-        jac[col, 4 + col] += 2.0 * dot
-    jac[1, 4] -= 2.0 * t0 * u[2]
-    jac[2, 4] += 2.0 * t0 * u[1]
-    jac[0, 5] += 2.0 * t0 * u[2]
-    jac[2, 5] -= 2.0 * t0 * u[0]
-    jac[0, 6] -= 2.0 * t0 * u[1]
-    jac[1, 6] += 2.0 * t0 * u[0]
+    columns = _spatial_rotate_columns(q, k, u)
+    for c in range(4):
+        column = columns[c]
+        jac[r, k + 3 + c] += sign * (w[0] * column[0] + w[1] * column[1] + w[2] * column[2])
 
 
 @njit(cache=True, inline="always")
-def point_jacobian_into(jac, q, nc, body, u):
-    """jac[:] = ∂(r_b + A_b ū)/∂q_b, jac shape (3, nc)."""
-    rotate_jacobian_into(jac, q, nc, body, u)
-    if body >= 0:
-        jac[0, 0] = 1.0
-        jac[1, 1] = 1.0
-        if nc == SPATIAL_NC:
-            jac[2, 2] = 1.0
+def add_point_jacobian(jac, r, q, nc, body, u, w, sign):
+    """jac[r, body's columns] += sign · wᵀ ∂(r_b + A_b ū)/∂q_b, w a tuple (3)."""
+    if body < 0:
+        return
+    k = body * nc
+    jac[r, k] += sign * w[0]
+    jac[r, k + 1] += sign * w[1]
+    if nc == SPATIAL_NC:
+        jac[r, k + 2] += sign * w[2]
+    add_rotate_jacobian(jac, r, q, nc, body, u, w, sign)
 
 
 @njit(cache=True, inline="always")
-def rotate_rate_into(out, q, v, nc, body, u):
-    """out[:] = d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b, out shape (3,), written out from the
-    Jacobian of :func:`rotate_jacobian_into` times q̇_b.
+def add_point_block(jac, r, q, nc, body, u, sign):
+    """jac[r:r + d, body's columns] += sign · ∂(r_b + A_b ū)/∂q_b, the d = 2 (planar) or 3
+    (spatial) rows of a body point's position."""
+    if body < 0:
+        return
+    k = body * nc
+    if nc == PLANAR_NC:
+        column = _planar_rotate_column(q, k, u)
+        for x in range(2):
+            jac[r + x, k + x] += sign
+            jac[r + x, k + 2] += sign * column[x]
+        return
+    columns = _spatial_rotate_columns(q, k, u)
+    for x in range(3):
+        jac[r + x, k + x] += sign
+        for c in range(4):
+            jac[r + x, k + 3 + c] += sign * columns[c][x]
+
+
+@njit(cache=True, inline="always")
+def rotate_rate_xyz(q, v, nc, body, u):
+    """d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b as a tuple (x, y, z).
 
     Planar: φ̇ Ω A ū.  Spatial: 4θ0θ̇0 ū + 2θ̇0 θ̄ × ū + 2(θ̄̇ (θ̄·ū) + θ̄ (θ̄̇·ū) + θ0 θ̄̇ × ū).
     """
     if body < 0:
-        for x in range(3):
-            out[x] = 0.0
-        return
+        return 0.0, 0.0, 0.0
     k = body * nc
     if nc == PLANAR_NC:
-        rotate_into(out, q, nc, body, u)
-        rate, along_x = v[k + 2], out[0]
-        out[0] = -rate * out[1]
-        out[1] = rate * along_x
-        out[2] = 0.0
-        return
+        x, y, _ = rotate_xyz(q, nc, body, u)
+        rate = v[k + 2]
+        return -rate * y, rate * x, 0.0
     t0, t1, t2, t3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     d0, d1, d2, d3 = v[k + 3], v[k + 4], v[k + 5], v[k + 6]
     dot = t1 * u[0] + t2 * u[1] + t3 * u[2]
     rate_dot = d1 * u[0] + d2 * u[1] + d3 * u[2]
-    out[0] = d0 * (4.0 * t0 * u[0] + 2.0 * (t2 * u[2] - t3 * u[1])) \
-        + 2.0 * (d1 * dot + t1 * rate_dot + t0 * (d2 * u[2] - d3 * u[1]))
-    out[1] = d0 * (4.0 * t0 * u[1] + 2.0 * (t3 * u[0] - t1 * u[2])) \
-        + 2.0 * (d2 * dot + t2 * rate_dot + t0 * (d3 * u[0] - d1 * u[2]))
-    out[2] = d0 * (4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0])) \
-        + 2.0 * (d3 * dot + t3 * rate_dot + t0 * (d1 * u[1] - d2 * u[0]))
+    return (d0 * (4.0 * t0 * u[0] + 2.0 * (t2 * u[2] - t3 * u[1]))
+            + 2.0 * (d1 * dot + t1 * rate_dot + t0 * (d2 * u[2] - d3 * u[1])),
+            d0 * (4.0 * t0 * u[1] + 2.0 * (t3 * u[0] - t1 * u[2]))
+            + 2.0 * (d2 * dot + t2 * rate_dot + t0 * (d3 * u[0] - d1 * u[2])),
+            d0 * (4.0 * t0 * u[2] + 2.0 * (t1 * u[1] - t2 * u[0]))
+            + 2.0 * (d3 * dot + t3 * rate_dot + t0 * (d1 * u[1] - d2 * u[0])))
 
 
 @njit(cache=True, inline="always")
-def point_rate_into(out, q, v, nc, body, u):
-    """out[:] = velocity ṙ_b + d(A_b ū)/dt of a body point, out shape (3,)."""
-    rotate_rate_into(out, q, v, nc, body, u)
-    _add_origin(out, v, nc, body)
+def point_rate_xyz(q, v, nc, body, u):
+    """Velocity ṙ_b + d(A_b ū)/dt of a body point as a tuple (x, y, z)."""
+    x, y, z = rotate_rate_xyz(q, v, nc, body, u)
+    return _with_origin(x, y, z, v, nc, body)
 
 
 @njit(cache=True, inline="always")
 def point_rate(q, v, nc, body, u):
     """Velocity of a body point, shape (3,)."""
-    out = np.empty(3)
-    point_rate_into(out, q, v, nc, body, u)
-    return out
+    return np.array(point_rate_xyz(q, v, nc, body, u))
 
 
 @njit(cache=True, inline="always")
-def rotate_quadratic_into(out, q, v, nc, body, u):
-    """out[:] = the part of d²(A_b ū)/dt² without q̈, out shape (3,).
+def rotate_quadratic_xyz(q, v, nc, body, u):
+    """The part of d²(A_b ū)/dt² without q̈ as a tuple (x, y, z).
 
     Planar: −A ū φ̇².  Spatial: A(θ) is quadratic in θ, so the term is 2 A_q(θ̇) ū with
     A_q(θ̇) = 2θ̇0² I + 2 θ̄̇θ̄̇ᵀ + 2 θ̇0 θ̄̇~ (equivalent to 002 eq. 31–33 on the manifold).
     """
     if body < 0:
-        out[:] = 0.0
-        return
+        return 0.0, 0.0, 0.0
     k = body * nc
     if nc == PLANAR_NC:
         w2 = v[k + 2] * v[k + 2]
-        rotate_into(out, q, nc, body, u)
-        out[0] = -out[0] * w2
-        out[1] = -out[1] * w2
-        out[2] = 0.0
-        return
+        x, y, _ = rotate_xyz(q, nc, body, u)
+        return -x * w2, -y * w2, 0.0
     d0, d1, d2, d3 = v[k + 3], v[k + 4], v[k + 5], v[k + 6]
     dot = d1 * u[0] + d2 * u[1] + d3 * u[2]
-    out[0] = 4.0 * (d0 * d0 * u[0] + d1 * dot + d0 * (d2 * u[2] - d3 * u[1]))
-    out[1] = 4.0 * (d0 * d0 * u[1] + d2 * dot + d0 * (d3 * u[0] - d1 * u[2]))
-    out[2] = 4.0 * (d0 * d0 * u[2] + d3 * dot + d0 * (d1 * u[1] - d2 * u[0]))
+    return (4.0 * (d0 * d0 * u[0] + d1 * dot + d0 * (d2 * u[2] - d3 * u[1])),
+            4.0 * (d0 * d0 * u[1] + d2 * dot + d0 * (d3 * u[0] - d1 * u[2])),
+            4.0 * (d0 * d0 * u[2] + d3 * dot + d0 * (d1 * u[1] - d2 * u[0])))

@@ -24,7 +24,8 @@ DRIVE_ROT); ``const`` float64 (k,).
 
 The small helpers below are inlined into the kernels (``inline="always"``), as those of
 :mod:`adapters.inhouse.bodykin` are, and for the same reason: a call of a separately compiled
-function with array arguments costs more than their arithmetic.
+function with array arguments costs more than their arithmetic.  Like those, they pass vectors as
+tuples (x, y, z), never through scratch arrays (the module notes there say why).
 """
 
 from __future__ import annotations
@@ -34,14 +35,14 @@ from numba import njit
 
 from adapters.inhouse.bodykin import (
     PLANAR_NC,
-    point_into,
-    point_jacobian_into,
-    rotate,
-    rotate_into,
-    rotate_jacobian_into,
-    rotate_quadratic_into,
-    rotate_rate_into,
-    point_rate_into,
+    add_point_block,
+    add_point_jacobian,
+    add_rotate_jacobian,
+    point_rate_xyz,
+    point_xyz,
+    rotate_quadratic_xyz,
+    rotate_rate_xyz,
+    rotate_xyz,
 )
 
 POINT, DOT_VV, DOT_VD, ANGLE, NORM, DRIVE_ROT = range(6)
@@ -54,16 +55,26 @@ def _drive(drive, t):
 
 
 @njit(cache=True, inline="always")
-def _rot_target_rate(k, tab_uj, tab_gj, theta, rate):
-    return rate * (np.cos(theta) * tab_uj[k] - np.sin(theta) * tab_gj[k])
+def _dot(a, b):
+    """aᵀb of two tuples (3)."""
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 @njit(cache=True, inline="always")
-def _add_block(jac, r, q, nc, body, block_row, sign=1.0):
-    if body >= 0:
-        k = body * nc
-        for c in range(nc):
-            jac[r, k + c] += sign * block_row[c]
+def _second_vector(k, kind, tab_uj, tab_gj, theta):
+    """The vector on body j of a DOT_VV row (ū_j) or of a DRIVE_ROT row (sin θ_d f̄_j +
+    cos θ_d ḡ_j), shape (3,) (a row view of ``tab_uj`` for DOT_VV)."""
+    if kind == DOT_VV:
+        return tab_uj[k]
+    s, c = np.sin(theta), np.cos(theta)
+    return s * tab_uj[k] + c * tab_gj[k]
+
+
+@njit(cache=True, inline="always")
+def _second_vector_rate(k, tab_uj, tab_gj, theta, rate):
+    """d/dt of a DRIVE_ROT row's vector on body j, θ̇_d (cos θ_d f̄_j − sin θ_d ḡ_j), shape (3,)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return rate * (c * tab_uj[k] - s * tab_gj[k])
 
 
 @njit(cache=True)
@@ -72,24 +83,21 @@ def phi(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3
     theta, _ = _drive(drive, t)
-    a, b, w = np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            point_into(a, q, nc, i, ui[k])
-            point_into(b, q, nc, j, uj[k])
+            a = point_xyz(q, nc, i, ui[k])
+            b = point_xyz(q, nc, j, uj[k])
             for x in range(dim):
                 out[r + x] = a[x] - b[x]
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            _second_vector_into(w, k, kd, uj, gj, theta)
-            rotate_into(a, q, nc, i, ui[k])
-            rotate_into(b, q, nc, j, w)
-            out[r] = _dot(a, b)
+            w = _second_vector(k, kd, uj, gj, theta)
+            out[r] = _dot(rotate_xyz(q, nc, i, ui[k]), rotate_xyz(q, nc, j, w))
         elif kd == DOT_VD:
-            point_into(b, q, nc, j, uj[k])
-            point_into(w, q, nc, i, pi[k])
-            rotate_into(a, q, nc, i, ui[k])
+            b = point_xyz(q, nc, j, uj[k])
+            w = point_xyz(q, nc, i, pi[k])
+            a = rotate_xyz(q, nc, i, ui[k])
             out[r] = a[0] * (b[0] - w[0]) + a[1] * (b[1] - w[1]) + a[2] * (b[2] - w[2]) \
                 - const[k] - driver[k] * theta
         elif kd == ANGLE:
@@ -108,72 +116,32 @@ def _euler_square(x, start):
         + x[start + 3] * x[start + 3]
 
 
-@njit(cache=True, inline="always")
-def _dot(a, b):
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-@njit(cache=True, inline="always")
-def _second_vector_into(out, k, kind, tab_uj, tab_gj, theta):
-    """The vector on body j of a DOT_VV row (ū_j) or of a DRIVE_ROT row (sin θ_d f̄_j +
-    cos θ_d ḡ_j), written into ``out`` (3,)."""
-    if kind == DOT_VV:
-        out[:] = tab_uj[k]
-        return
-    s, c = np.sin(theta), np.cos(theta)
-    for x in range(3):
-        out[x] = s * tab_uj[k, x] + c * tab_gj[k, x]
-
-
-@njit(cache=True, inline="always")
-def _add_vector_times_jacobian(jac, r, nc, body, vector, block, sign):
-    """jac[r, body block] += sign · vectorᵀ block, block (3, nc)."""
-    if body < 0:
-        return
-    k = body * nc
-    for c in range(nc):
-        jac[r, k + c] += sign * (vector[0] * block[0, c] + vector[1] * block[1, c]
-                                 + vector[2] * block[2, c])
-
-
 @njit(cache=True)
 def jacobian(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
     """Constraint Jacobian Φ_q(q, t), shape (m, n)."""
     n = q.shape[0]
     jac = np.zeros((m, n))
-    dim = 2 if nc == PLANAR_NC else 3
     theta, _ = _drive(drive, t)
-    ji, jj = np.empty((3, nc)), np.empty((3, nc))
-    a, b, w, d = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            point_jacobian_into(ji, q, nc, i, ui[k])
-            point_jacobian_into(jj, q, nc, j, uj[k])
-            for x in range(dim):
-                _add_block(jac, r + x, q, nc, i, ji[x])
-                _add_block(jac, r + x, q, nc, j, jj[x], -1.0)
+            add_point_block(jac, r, q, nc, i, ui[k], 1.0)
+            add_point_block(jac, r, q, nc, j, uj[k], -1.0)
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            _second_vector_into(w, k, kd, uj, gj, theta)
-            rotate_into(a, q, nc, i, ui[k])
-            rotate_into(b, q, nc, j, w)
-            rotate_jacobian_into(ji, q, nc, i, ui[k])
-            rotate_jacobian_into(jj, q, nc, j, w)
-            _add_vector_times_jacobian(jac, r, nc, i, b, ji, 1.0)
-            _add_vector_times_jacobian(jac, r, nc, j, a, jj, 1.0)
+            w = _second_vector(k, kd, uj, gj, theta)
+            a = rotate_xyz(q, nc, i, ui[k])
+            b = rotate_xyz(q, nc, j, w)
+            add_rotate_jacobian(jac, r, q, nc, i, ui[k], b, 1.0)
+            add_rotate_jacobian(jac, r, q, nc, j, w, a, 1.0)
         elif kd == DOT_VD:
-            rotate_into(a, q, nc, i, ui[k])
-            point_into(b, q, nc, j, uj[k])
-            point_into(w, q, nc, i, pi[k])
-            for x in range(3):
-                d[x] = b[x] - w[x]
-            rotate_jacobian_into(ji, q, nc, i, ui[k])
-            _add_vector_times_jacobian(jac, r, nc, i, d, ji, 1.0)
-            point_jacobian_into(ji, q, nc, i, pi[k])
-            _add_vector_times_jacobian(jac, r, nc, i, a, ji, -1.0)
-            point_jacobian_into(jj, q, nc, j, uj[k])
-            _add_vector_times_jacobian(jac, r, nc, j, a, jj, 1.0)
+            a = rotate_xyz(q, nc, i, ui[k])
+            b = point_xyz(q, nc, j, uj[k])
+            w = point_xyz(q, nc, i, pi[k])
+            d = (b[0] - w[0], b[1] - w[1], b[2] - w[2])
+            add_rotate_jacobian(jac, r, q, nc, i, ui[k], d, 1.0)
+            add_point_jacobian(jac, r, q, nc, i, pi[k], a, -1.0)
+            add_point_jacobian(jac, r, q, nc, j, uj[k], a, 1.0)
         elif kd == ANGLE:
             if j >= 0:
                 jac[r, j * nc + 2] += 1.0
@@ -193,8 +161,8 @@ def phi_t(q, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m):
     for k in range(kind.shape[0]):
         r = row[k]
         if kind[k] == DRIVE_ROT:
-            w_dot = _rot_target_rate(k, uj, gj, theta, rate)
-            out[r] = rotate(q, nc, bi[k], ui[k]) @ rotate(q, nc, bj[k], w_dot)
+            w_dot = _second_vector_rate(k, uj, gj, theta, rate)
+            out[r] = _dot(rotate_xyz(q, nc, bi[k], ui[k]), rotate_xyz(q, nc, bj[k], w_dot))
         elif kind[k] == DOT_VD or kind[k] == ANGLE:
             out[r] = -driver[k] * rate
     return out
@@ -206,48 +174,41 @@ def gamma(q, v, t, nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, 
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3
     theta, rate = _drive(drive, t)
-    a_i, a_j, da_i, da_j = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
-    qa_i, qa_j, w, w_dot = np.empty(3), np.empty(3), np.empty(3), np.empty(3)
     for k in range(kind.shape[0]):
         r, i, j = row[k], bi[k], bj[k]
         kd = kind[k]
         if kd == POINT:
-            rotate_quadratic_into(qa_j, q, v, nc, j, uj[k])
-            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
+            qa_j = rotate_quadratic_xyz(q, v, nc, j, uj[k])
+            qa_i = rotate_quadratic_xyz(q, v, nc, i, ui[k])
             for x in range(dim):
                 out[r + x] = qa_j[x] - qa_i[x]
         elif kd == DOT_VV or kd == DRIVE_ROT:
-            _second_vector_into(w, k, kd, uj, gj, theta)
-            rotate_into(a_i, q, nc, i, ui[k])
-            rotate_into(a_j, q, nc, j, w)
-            rotate_rate_into(da_i, q, v, nc, i, ui[k])
-            rotate_rate_into(da_j, q, v, nc, j, w)
-            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
-            rotate_quadratic_into(qa_j, q, v, nc, j, w)
+            w = _second_vector(k, kd, uj, gj, theta)
+            a_i, a_j = rotate_xyz(q, nc, i, ui[k]), rotate_xyz(q, nc, j, w)
+            da_i, da_j = rotate_rate_xyz(q, v, nc, i, ui[k]), rotate_rate_xyz(q, v, nc, j, w)
+            qa_i = rotate_quadratic_xyz(q, v, nc, i, ui[k])
+            qa_j = rotate_quadratic_xyz(q, v, nc, j, w)
             acc = _dot(qa_i, a_j) + 2.0 * _dot(da_i, da_j) + _dot(a_i, qa_j)
             if kd == DRIVE_ROT:
                 # Φ_t = a_iᵀ A_j ẇ:  2 Φ_qt q̇ = 2 (ȧ_iᵀ A_j ẇ + a_iᵀ Ȧ_j ẇ);  Φ_tt = −θ̇_d² Φ.
-                c, s = np.cos(theta), np.sin(theta)
-                for x in range(3):
-                    w_dot[x] = rate * (c * uj[k, x] - s * gj[k, x])
-                rotate_into(qa_j, q, nc, j, w_dot)
-                rotate_rate_into(da_j, q, v, nc, j, w_dot)
-                acc += 2.0 * (_dot(da_i, qa_j) + _dot(a_i, da_j))
+                w_dot = _second_vector_rate(k, uj, gj, theta, rate)
+                acc += 2.0 * (_dot(da_i, rotate_xyz(q, nc, j, w_dot))
+                              + _dot(a_i, rotate_rate_xyz(q, v, nc, j, w_dot)))
                 acc -= rate * rate * _dot(a_i, a_j)
             out[r] = -acc
         elif kd == DOT_VD:
-            rotate_into(a_i, q, nc, i, ui[k])
-            point_into(a_j, q, nc, j, uj[k])
-            point_into(w, q, nc, i, pi[k])
-            point_rate_into(da_j, q, v, nc, j, uj[k])
-            point_rate_into(w_dot, q, v, nc, i, pi[k])
-            rotate_quadratic_into(qa_j, q, v, nc, j, uj[k])
-            rotate_quadratic_into(qa_i, q, v, nc, i, pi[k])
+            a_i = rotate_xyz(q, nc, i, ui[k])
+            a_j = point_xyz(q, nc, j, uj[k])
+            w = point_xyz(q, nc, i, pi[k])
+            da_j = point_rate_xyz(q, v, nc, j, uj[k])
+            w_dot = point_rate_xyz(q, v, nc, i, pi[k])
+            qa_j = rotate_quadratic_xyz(q, v, nc, j, uj[k])
+            qa_i = rotate_quadratic_xyz(q, v, nc, i, pi[k])
             total = 0.0
             for x in range(3):
                 total += a_i[x] * (qa_j[x] - qa_i[x])
-            rotate_quadratic_into(qa_i, q, v, nc, i, ui[k])
-            rotate_rate_into(da_i, q, v, nc, i, ui[k])
+            qa_i = rotate_quadratic_xyz(q, v, nc, i, ui[k])
+            da_i = rotate_rate_xyz(q, v, nc, i, ui[k])
             for x in range(3):
                 total += qa_i[x] * (a_j[x] - w[x]) + 2.0 * da_i[x] * (da_j[x] - w_dot[x])
             out[r] = -total
