@@ -91,7 +91,8 @@ def _euler_block_solve(out, rhs, theta, inertia_inverse, c):
     With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
     length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
     and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: per column two products with E and one with J̄⁻¹,
-    instead of assembling B and factorising it.
+    instead of assembling B and factorising it.  A zero column (a constraint row that does not
+    touch the body: most of them) gives a zero column without the products.
     """
     g = g_bar(theta)
     size = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2] \
@@ -99,6 +100,11 @@ def _euler_block_solve(out, rhs, theta, inertia_inverse, c):
     rotational, normal = 1.0 / (4.0 * size), 1.0 / size
     y, z = np.empty(3), np.empty(3)
     for col in range(rhs.shape[1]):
+        if rhs[0, col] == 0.0 and rhs[1, col] == 0.0 and rhs[2, col] == 0.0 \
+                and rhs[3, col] == 0.0:
+            for r in range(4):
+                out[r, col] = 0.0
+            continue
         for r in range(3):
             y[r] = rotational * (g[r, 0] * rhs[0, col] + g[r, 1] * rhs[1, col]
                                  + g[r, 2] * rhs[2, col] + g[r, 3] * rhs[3, col])
