@@ -28,7 +28,8 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from adapters.inhouse.linalg import CERTIFICATE_MARGIN, gram_condition_bound, min_norm_solve
+from adapters.inhouse.linalg import (CERTIFICATE_MARGIN, gram_condition_bound, min_norm_solve,
+                                     min_norm_solve_and_bound)
 
 #: From this many constraint rows on the banded solves are used.  Measured on n_fourbar@N at the
 #: start (µs per acceleration solve, dense / banded; per projection solve likewise): 14 rows
@@ -215,11 +216,27 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
         False when the matrix is not positive definite or its estimated condition too large.
     x : ndarray, shape (m,) or (0,)
     """
+    accepted, x, _, _ = banded_spd_solve_and_condition(matrix, weights, rhs, cut, sparsity_arrays)
+    return accepted, x
+
+
+@njit(cache=True)
+def banded_spd_solve_and_condition(matrix, weights, rhs, cut, sparsity_arrays):
+    """:func:`banded_spd_solve` and, from the same factorisation, its estimate of κ₂(A W Aᵀ).
+
+    Returns
+    -------
+    accepted : bool
+    x : ndarray, shape (m,) or (0,)
+    positive : bool
+        False when A W Aᵀ is not positive definite (the estimate is then inf).
+    condition : float
+    """
     position, bandwidth = sparsity_arrays[4], sparsity_arrays[5]
     m = matrix.shape[0]
     positive, band, condition = _banded_factor(matrix, weights, sparsity_arrays)
     if not (positive and CERTIFICATE_MARGIN * cut * condition < 1.0):
-        return False, np.empty(0)
+        return False, np.empty(0), positive, condition
     lower, size, kd, lead, one, info = _band_arguments(m, bandwidth)
     permuted = np.empty(m)
     for r in range(m):
@@ -229,7 +246,7 @@ def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
     solution = np.empty(m)
     for r in range(m):
         solution[r] = permuted[position[r]]
-    return True, solution
+    return True, solution, positive, condition
 
 
 @njit(cache=True)
@@ -246,6 +263,12 @@ def conditioning_indicator(matrix, sparsity_arrays):
                                                 sparsity_arrays)
     else:
         positive, condition = gram_condition_bound(matrix)
+    return _indicator(positive, condition)
+
+
+@njit(cache=True, inline="always")
+def _indicator(positive, condition):
+    """ρ̂ of a condition estimate of Φ_q Φ_qᵀ (:func:`conditioning_indicator`)."""
     if not positive or not condition < np.inf:
         return 0.0
     return 1.0 / np.sqrt(condition)
@@ -255,10 +278,26 @@ def conditioning_indicator(matrix, sparsity_arrays):
 def min_norm_correction(matrix, rhs, cut, sparsity_arrays):
     """Φ_q⁺ r of the projections (002 eq. 126) as :func:`~adapters.inhouse.linalg.min_norm_solve`
     does it, with the banded normal equations Aᵀ(AAᵀ)⁻¹ r for :data:`BANDED_MIN_ROWS` rows or
-    more; ``matrix`` (m, n) has every row of ``sparsity_arrays``."""
+    more; ``matrix`` (m, n) has every row of ``sparsity_arrays``.  Shape (n,)."""
+    return min_norm_correction_and_indicator(matrix, rhs, cut, sparsity_arrays)[0]
+
+
+@njit(cache=True)
+def min_norm_correction_and_indicator(matrix, rhs, cut, sparsity_arrays):
+    """:func:`min_norm_correction` and, from the same factorisation of Φ_q Φ_qᵀ, ρ̂ of
+    :func:`conditioning_indicator` (the velocity projection's Φ_q is the one whose ρ̂ the placed
+    passages need: one factorisation instead of two).
+
+    Returns
+    -------
+    correction : ndarray, shape (n,)
+    indicator : float
+    """
     if matrix.shape[0] >= BANDED_MIN_ROWS:
-        accepted, y = banded_spd_solve(matrix, np.ones(matrix.shape[1]), rhs, cut * cut,
-                                       sparsity_arrays)
+        accepted, y, positive, condition = banded_spd_solve_and_condition(
+            matrix, np.ones(matrix.shape[1]), rhs, cut * cut, sparsity_arrays)
         if accepted:
-            return pattern_rmatvec(matrix, sparsity_arrays[0], y)
-    return min_norm_solve(matrix, rhs, cut)
+            return pattern_rmatvec(matrix, sparsity_arrays[0], y), _indicator(positive, condition)
+        return min_norm_solve(matrix, rhs, cut), _indicator(positive, condition)
+    correction, positive, bound = min_norm_solve_and_bound(matrix, rhs, cut)
+    return correction, _indicator(positive, bound)

@@ -28,7 +28,8 @@ import numpy as np
 from numba import njit
 
 from adapters.inhouse import kernels
-from adapters.inhouse.banded import conditioning_indicator, min_norm_correction, pattern_matvec
+from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction,
+                                     min_norm_correction_and_indicator, pattern_matvec)
 from adapters.inhouse.dynamics import index1_acceleration
 from adapters.inhouse.fold import passage_times, plan_passage
 from adapters.inhouse.rank import full_pivot_elimination
@@ -86,9 +87,9 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
         q = q - min_norm_correction(jac, residual, cut, sparsity_arrays)
     counters[FACTORIZATIONS] += 1
     jac = _rows_jacobian(q, t, rows, constraint_args, counters)
-    v = v - min_norm_correction(jac, pattern_matvec(jac, sparsity_arrays[0], v), cut,
-                                sparsity_arrays)
-    return q, v, conditioning_indicator(jac, sparsity_arrays)
+    correction, indicator = min_norm_correction_and_indicator(
+        jac, pattern_matvec(jac, sparsity_arrays[0], v), cut, sparsity_arrays)
+    return q, v - correction, indicator
 
 
 @njit(cache=True)

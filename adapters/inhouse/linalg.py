@@ -145,13 +145,28 @@ def certified_spd_solve(matrix, rhs, cut):
     k = rhs.shape[0]
     if k == 0:
         return True, np.empty(0)
-    positive, lower = _cholesky(matrix)
-    if not positive:  # not positive definite: no certificate
-        return False, np.empty(0)
-    bound = _frobenius(matrix) * _inverse_frobenius_squared(lower)
-    if not bound * CERTIFICATE_MARGIN * cut < 1.0:
+    positive, lower, bound = _certified_factor(matrix)
+    if not (positive and bound * CERTIFICATE_MARGIN * cut < 1.0):
         return False, np.empty(0)
     return True, _cholesky_solve(lower, rhs)
+
+
+@njit(cache=True)
+def _certified_factor(matrix):
+    """The Cholesky factor of a symmetric matrix (k, k) and the certificate's bound
+    ‖S‖_F ‖L⁻¹‖_F² ≥ κ₂(S) (:func:`certified_spd_solve`).
+
+    Returns
+    -------
+    positive : bool
+        False when the matrix is not positive definite (L incomplete, the bound inf).
+    lower : ndarray, shape (k, k)
+    bound : float
+    """
+    positive, lower = _cholesky(matrix)
+    if not positive:
+        return False, lower, np.inf
+    return True, lower, _frobenius(matrix) * _inverse_frobenius_squared(lower)
 
 
 @njit(cache=True)
@@ -165,11 +180,8 @@ def gram_condition_bound(matrix):
         False when A Aᵀ is not positive definite (the bound is then inf).
     bound : float
     """
-    gram = weighted_gram(matrix, np.ones(matrix.shape[1]))
-    positive, lower = _cholesky(gram)
-    if not positive:
-        return False, np.inf
-    return True, _frobenius(gram) * _inverse_frobenius_squared(lower)
+    positive, _, bound = _certified_factor(weighted_gram(matrix, np.ones(matrix.shape[1])))
+    return positive, bound
 
 
 @njit(cache=True)
@@ -234,9 +246,25 @@ def rmatvec(matrix, y):
 def min_norm_solve(matrix, rhs, cut):
     """:func:`truncated_solve` of a wide matrix (m, n), m ≤ n, rhs (m,), by the normal equations
     x = Aᵀ(AAᵀ)⁻¹ rhs when :func:`certified_spd_solve` certifies AAᵀ at cut² (σ(AAᵀ) = σ(A)²), else
-    by the truncated SVD itself."""
-    certified, y = certified_spd_solve(weighted_gram(matrix, np.ones(matrix.shape[1])), rhs,
-                                       cut * cut)
-    if certified:
-        return rmatvec(matrix, y)
-    return truncated_solve(matrix, rhs, cut)
+    by the truncated SVD itself, shape (n,)."""
+    return min_norm_solve_and_bound(matrix, rhs, cut)[0]
+
+
+@njit(cache=True)
+def min_norm_solve_and_bound(matrix, rhs, cut):
+    """:func:`min_norm_solve` and, from the same factorisation, the bound of
+    :func:`gram_condition_bound` on κ₂(AAᵀ).
+
+    Returns
+    -------
+    x : ndarray, shape (n,)
+    positive : bool
+        False when AAᵀ is not positive definite (the bound is then inf).
+    bound : float
+    """
+    if rhs.shape[0] == 0:
+        return np.zeros(matrix.shape[1]), True, 0.0
+    positive, lower, bound = _certified_factor(weighted_gram(matrix, np.ones(matrix.shape[1])))
+    if positive and bound * CERTIFICATE_MARGIN * (cut * cut) < 1.0:
+        return rmatvec(matrix, _cholesky_solve(lower, rhs)), positive, bound
+    return truncated_solve(matrix, rhs, cut), positive, bound

@@ -30,7 +30,8 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
-from adapters.inhouse.banded import conditioning_indicator, min_norm_correction, pattern_matvec
+from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction,
+                                     min_norm_correction_and_indicator, pattern_matvec)
 from adapters.inhouse.fold import SAFE_INDICATOR
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
@@ -120,8 +121,12 @@ class Formulation(SecondOrderSystem):
         """Shift ``indicators`` and put ρ̂ of ``jac`` (Φ_q on the kept rows, C-contiguous) last;
         nothing when no indicator is kept."""
         if self.indicators is not None:
-            self.indicators[0], self.indicators[1] = self.indicators[1], conditioning_indicator(
-                jac, self.constraints.sparsity.arrays)
+            self._push_indicator(conditioning_indicator(jac, self.constraints.sparsity.arrays))
+
+    def _push_indicator(self, indicator: float):
+        """Shift ``indicators`` and put ``indicator`` last; nothing when none is kept."""
+        if self.indicators is not None:
+            self.indicators[0], self.indicators[1] = self.indicators[1], indicator
 
     # -- constraint pieces on the independent rows ------------------------------------------
     def jacobian(self, t, q):
@@ -351,8 +356,12 @@ class DirectCorrection(_Projection):
     def project(self, t, q, v):
         q = self.project_position(t, q)
         jac = np.ascontiguousarray(self.jacobian(t, q))
-        self._record_indicator(jac)
-        return q, v - self._min_norm(jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v))
+        self.counters["factorizations"] += 1
+        correction, indicator = min_norm_correction_and_indicator(
+            jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v), self.cut,
+            self.constraints.sparsity.arrays)
+        self._push_indicator(indicator)
+        return q, v - correction
 
 
 class GeometricElimination(_Projection):
