@@ -17,12 +17,11 @@ helper writing into a scratch array made every row of Φ_q and γ cost several t
 (a spatial slider-crank's γ 2.99 µs, its six DOT_VV rows 1.5 µs of it; the same rows written
 with tuples 0.08 µs), presumably because the compiler must assume that a scratch array may alias
 q and q̇ and so reloads them after every store.  Jacobians are added straight into the rows of
-Φ_q (:func:`add_rotate_jacobian`, :func:`add_point_jacobian`, :func:`add_point_block`).  The force kernels use the
-allocating forms :func:`rotate`, :func:`point` and :func:`point_rate`.
-All are inlined into their callers
-(``inline="always"``): a call of a separately compiled function with array arguments costs more
-than these few flops (its arguments' reference counts, atomic updates, are changed on entry and
-exit).
+Φ_q (:func:`add_rotate_jacobian`, :func:`add_point_jacobian`, :func:`add_point_block`); the
+force kernels of :mod:`adapters.inhouse.dynamics` follow the same rule.  All are inlined into
+their callers (``inline="always"``): a call of a separately compiled function with array
+arguments costs more than these few flops (its arguments' reference counts, atomic updates, are
+changed on entry and exit).
 
 All functions are numba-compiled; ``body < 0`` denotes ground (the world frame), whose points and
 vectors are constant.  Vectors are always 3-vectors (planar ones have z = 0).
@@ -71,18 +70,6 @@ def point_xyz(q, nc, body, u):
     """World position r_b + A_b ū of a body point as a tuple (x, y, z)  (002 eq. 1)."""
     x, y, z = rotate_xyz(q, nc, body, u)
     return _with_origin(x, y, z, q, nc, body)
-
-
-@njit(cache=True, inline="always")
-def rotate(q, nc, body, u):
-    """World vector A_b ū, shape (3,)."""
-    return np.array(rotate_xyz(q, nc, body, u))
-
-
-@njit(cache=True, inline="always")
-def point(q, nc, body, u):
-    """World position r_b + A_b ū of a body point, shape (3,)  (002 eq. 1)."""
-    return np.array(point_xyz(q, nc, body, u))
 
 
 @njit(cache=True, inline="always")
@@ -190,12 +177,6 @@ def point_rate_xyz(q, v, nc, body, u):
     """Velocity ṙ_b + d(A_b ū)/dt of a body point as a tuple (x, y, z)."""
     x, y, z = rotate_rate_xyz(q, v, nc, body, u)
     return _with_origin(x, y, z, v, nc, body)
-
-
-@njit(cache=True, inline="always")
-def point_rate(q, v, nc, body, u):
-    """Velocity of a body point, shape (3,)."""
-    return np.array(point_rate_xyz(q, v, nc, body, u))
 
 
 @njit(cache=True, inline="always")

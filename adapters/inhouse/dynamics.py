@@ -24,7 +24,7 @@ from numba import njit
 from adapters.inhouse import kernels
 from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_matvec,
                                      pattern_rmatvec)
-from adapters.inhouse.bodykin import PLANAR_NC, point, point_rate, rotate
+from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, sparse_left_product,
                                      truncated_solve, weighted_gram)
@@ -193,60 +193,69 @@ def planar_mass_diagonal(masses, inertias):
 def _inertial_forces(q, v, nc, masses, gravity, inertias):
     """Q_v + gravity, shape (n,) (002 eq. 62–63)."""
     force = np.zeros(q.shape[0])
-    omega, spin, gyroscopic = np.empty(3), np.empty(3), np.empty(3)
     for b in range(masses.shape[0]):
         k = b * nc
         for a in range(3 if nc != PLANAR_NC else 2):
             force[k + a] = masses[b] * gravity[a]
         if nc == PLANAR_NC:
             continue
-        g = g_bar(q[k + 3:k + 7])
-        for r in range(3):
-            omega[r] = g[r, 0] * v[k + 3] + g[r, 1] * v[k + 4] + g[r, 2] * v[k + 5] \
-                + g[r, 3] * v[k + 6]
-        for r in range(3):
-            spin[r] = inertias[b, r, 0] * omega[0] + inertias[b, r, 1] * omega[1] \
-                + inertias[b, r, 2] * omega[2]
-        _cross_into(gyroscopic, omega, spin)
-        _add_g_bar_transpose(force, k + 3, g, gyroscopic, -1.0)
+        g = _g_bar_rows(q, k + 3)
+        omega = (g[0][0] * v[k + 3] + g[0][1] * v[k + 4] + g[0][2] * v[k + 5] + g[0][3] * v[k + 6],
+                 g[1][0] * v[k + 3] + g[1][1] * v[k + 4] + g[1][2] * v[k + 5] + g[1][3] * v[k + 6],
+                 g[2][0] * v[k + 3] + g[2][1] * v[k + 4] + g[2][2] * v[k + 5] + g[2][3] * v[k + 6])
+        inertia = inertias[b]
+        spin = (inertia[0, 0] * omega[0] + inertia[0, 1] * omega[1] + inertia[0, 2] * omega[2],
+                inertia[1, 0] * omega[0] + inertia[1, 1] * omega[1] + inertia[1, 2] * omega[2],
+                inertia[2, 0] * omega[0] + inertia[2, 1] * omega[1] + inertia[2, 2] * omega[2])
+        _add_g_bar_transpose(force, k + 3, g, _cross(omega, spin), -1.0)
     return force
 
 
 @njit(cache=True, inline="always")
-def _cross_into(out, a, b):
-    """out[:] = a × b, all (3,)."""
-    out[0] = a[1] * b[2] - a[2] * b[1]
-    out[1] = a[2] * b[0] - a[0] * b[2]
-    out[2] = a[0] * b[1] - a[1] * b[0]
+def _cross(a, b):
+    """a × b of two tuples (3), a tuple (3)."""
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+@njit(cache=True, inline="always")
+def _g_bar_rows(q, start):
+    """The rows of Ḡ (:func:`g_bar`) of θ = q[start:start + 4], three tuples (4): the force
+    kernels' form (tuples, not a scratch array: :mod:`adapters.inhouse.bodykin` says why)."""
+    t0, t1, t2, t3 = q[start], q[start + 1], q[start + 2], q[start + 3]
+    return ((-2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2),
+            (-2.0 * t2, -2.0 * t3, 2.0 * t0, 2.0 * t1),
+            (-2.0 * t3, 2.0 * t2, -2.0 * t1, 2.0 * t0))
 
 
 @njit(cache=True, inline="always")
 def _add_g_bar_transpose(out, start, g, vector, sign):
-    """out[start:start + 4] += sign · Ḡᵀ vector, g = Ḡ (3, 4), vector (3,)."""
+    """out[start:start + 4] += sign · Ḡᵀ vector, g the rows of Ḡ (:func:`_g_bar_rows`), vector
+    a tuple (3)."""
     for c in range(4):
-        out[start + c] += sign * (g[0, c] * vector[0] + g[1, c] * vector[1]
-                                  + g[2, c] * vector[2])
+        out[start + c] += sign * (g[0][c] * vector[0] + g[1][c] * vector[1]
+                                  + g[2][c] * vector[2])
 
 
 @njit(cache=True, inline="always")
 def _add_point_force(out, q, nc, body, u, f):
-    """Add the generalised force of world force f at body point ū."""
+    """Add the generalised force of world force f (a tuple (3)) at body point ū."""
     if body < 0:
         return
     k = body * nc
-    arm = rotate(q, nc, body, u)
+    arm = rotate_xyz(q, nc, body, u)
     if nc == PLANAR_NC:
         out[k] += f[0]
         out[k + 1] += f[1]
         out[k + 2] += arm[0] * f[1] - arm[1] * f[0]
         return
-    out[k:k + 3] += f
-    _add_torque(out, q, nc, body, np.cross(arm, f), 1.0)
+    for a in range(3):
+        out[k + a] += f[a]
+    _add_torque(out, q, nc, body, _cross(arm, f), 1.0)
 
 
 @njit(cache=True, inline="always")
 def _add_torque(out, q, nc, body, n, sign):
-    """Add the generalised force of world torque sign · n (sign = ±1) on a body."""
+    """Add the generalised force of world torque sign · n (a tuple (3), sign = ±1) on a body."""
     if body < 0:
         return
     k = body * nc
@@ -255,13 +264,12 @@ def _add_torque(out, q, nc, body, n, sign):
         return
     # Ḡᵀ Aᵀ n: Aᵀ n = (2e₀² − 1) n + 2e (eᵀn) − 2e₀ (e × n) is the torque in body axes
     # (002 eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
-    theta = q[k + 3:k + 7]
-    e0, e1, e2, e3 = theta[0], theta[1], theta[2], theta[3]
+    e0, e1, e2, e3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     scale, along = 2.0 * e0 * e0 - 1.0, 2.0 * (e1 * n[0] + e2 * n[1] + e3 * n[2])
-    local = np.array([scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
-                      scale * n[1] + along * e2 - 2.0 * e0 * (e3 * n[0] - e1 * n[2]),
-                      scale * n[2] + along * e3 - 2.0 * e0 * (e1 * n[1] - e2 * n[0])])
-    _add_g_bar_transpose(out, k + 3, g_bar(theta), local, sign)
+    local = (scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
+             scale * n[1] + along * e2 - 2.0 * e0 * (e3 * n[0] - e1 * n[2]),
+             scale * n[2] + along * e3 - 2.0 * e0 * (e1 * n[1] - e2 * n[0]))
+    _add_g_bar_transpose(out, k + 3, _g_bar_rows(q, k + 3), local, sign)
 
 
 F_JOINT_TORQUE, F_JOINT_FORCE, F_POINT, F_TORQUE, F_SPRING = range(5)
@@ -273,26 +281,35 @@ def _applied_forces(out, q, v, nc, kind, bi, bj, va, vb, vc, scalars):
     for k in range(kind.shape[0]):
         i, j, kd = bi[k], bj[k], kind[k]
         if kd == F_JOINT_TORQUE:  # τ about the joint axis on body j, −τ on body i
-            n = rotate(q, nc, i, va[k])
-            n *= scalars[k, 0]
+            n = _scaled(rotate_xyz(q, nc, i, va[k]), scalars[k, 0])
             _add_torque(out, q, nc, j, n, 1.0)
             _add_torque(out, q, nc, i, n, -1.0)
         elif kd == F_JOINT_FORCE:  # f along the axis at the joint points
-            f = scalars[k, 0] * rotate(q, nc, i, va[k])
+            f = _scaled(rotate_xyz(q, nc, i, va[k]), scalars[k, 0])
             _add_point_force(out, q, nc, j, vc[k], f)
-            _add_point_force(out, q, nc, i, vb[k], -f)
+            _add_point_force(out, q, nc, i, vb[k], (-f[0], -f[1], -f[2]))
         elif kd == F_POINT:
-            _add_point_force(out, q, nc, i, vb[k], va[k])
+            _add_point_force(out, q, nc, i, vb[k], (va[k, 0], va[k, 1], va[k, 2]))
         elif kd == F_TORQUE:
-            _add_torque(out, q, nc, i, va[k], 1.0)
+            _add_torque(out, q, nc, i, (va[k, 0], va[k, 1], va[k, 2]), 1.0)
         else:  # F_SPRING: tension k(L − L0) + c L̇ pulls the points together
-            d = point(q, nc, j, vc[k]) - point(q, nc, i, vb[k])
-            length = np.sqrt(d @ d)
-            direction = d / length
-            rate = direction @ (point_rate(q, v, nc, j, vc[k]) - point_rate(q, v, nc, i, vb[k]))
+            p_j, p_i = point_xyz(q, nc, j, vc[k]), point_xyz(q, nc, i, vb[k])
+            d = (p_j[0] - p_i[0], p_j[1] - p_i[1], p_j[2] - p_i[2])
+            length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+            direction = (d[0] / length, d[1] / length, d[2] / length)
+            r_j, r_i = point_rate_xyz(q, v, nc, j, vc[k]), point_rate_xyz(q, v, nc, i, vb[k])
+            rate = direction[0] * (r_j[0] - r_i[0]) + direction[1] * (r_j[1] - r_i[1]) \
+                + direction[2] * (r_j[2] - r_i[2])
             tension = scalars[k, 0] * (length - scalars[k, 2]) + scalars[k, 1] * rate
-            _add_point_force(out, q, nc, i, vb[k], tension * direction)
-            _add_point_force(out, q, nc, j, vc[k], -tension * direction)
+            pull = _scaled(direction, tension)
+            _add_point_force(out, q, nc, i, vb[k], pull)
+            _add_point_force(out, q, nc, j, vc[k], (-pull[0], -pull[1], -pull[2]))
+
+
+@njit(cache=True, inline="always")
+def _scaled(vector, factor):
+    """factor · vector of a tuple (3), a tuple (3)."""
+    return factor * vector[0], factor * vector[1], factor * vector[2]
 
 
 @njit(cache=True)
