@@ -26,7 +26,7 @@ from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_
                                      pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, sparse_left_product,
+from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec,
                                      truncated_solve, weighted_gram)
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
@@ -83,50 +83,56 @@ def _inverse_3x3(matrix):
     return inverse / _determinant_3x3(a)
 
 
-@njit(cache=True)
-def _euler_block_solve(out, rhs, theta, inertia_inverse, c):
-    """out[:] = B⁻¹ rhs for the rotational block B = Ḡᵀ J̄ Ḡ + c θθᵀ of one body, rhs and out
-    (4, k), ``inertia_inverse`` J̄⁻¹ (3, 3), c > 0.
+@njit(cache=True, inline="always")
+def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, c):
+    """out[i, start:start + 4] = B⁻¹ rhs for the rotational block B = Ḡᵀ J̄ Ḡ + c θθᵀ of one
+    body, rhs a tuple (4), θ (4,), ``g`` = Ḡ(θ) (3, 4), ``inertia_inverse`` J̄⁻¹ (3, 3), c > 0.
 
     With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
     length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
-    and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: per column two products with E and one with J̄⁻¹,
-    instead of assembling B and factorising it.  A zero column (a constraint row that does not
-    touch the body: most of them) gives a zero column without the products.
+    and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: two products with E and one with J̄⁻¹, instead of
+    assembling B and factorising it.
     """
-    g = g_bar(theta)
     size = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2] \
         + theta[3] * theta[3]
     rotational, normal = 1.0 / (4.0 * size), 1.0 / size
-    y, z = np.empty(3), np.empty(3)
-    for col in range(rhs.shape[1]):
-        if rhs[0, col] == 0.0 and rhs[1, col] == 0.0 and rhs[2, col] == 0.0 \
-                and rhs[3, col] == 0.0:
-            for r in range(4):
-                out[r, col] = 0.0
-            continue
-        for r in range(3):
-            y[r] = rotational * (g[r, 0] * rhs[0, col] + g[r, 1] * rhs[1, col]
-                                 + g[r, 2] * rhs[2, col] + g[r, 3] * rhs[3, col])
-        along = normal * normal / c * (theta[0] * rhs[0, col] + theta[1] * rhs[1, col]
-                                       + theta[2] * rhs[2, col] + theta[3] * rhs[3, col])
-        for r in range(3):
-            z[r] = rotational * (inertia_inverse[r, 0] * y[0] + inertia_inverse[r, 1] * y[1]
-                                 + inertia_inverse[r, 2] * y[2])
-        for r in range(4):
-            out[r, col] = g[0, r] * z[0] + g[1, r] * z[1] + g[2, r] * z[2] + theta[r] * along
+    y = (rotational * (g[0, 0] * rhs[0] + g[0, 1] * rhs[1] + g[0, 2] * rhs[2] + g[0, 3] * rhs[3]),
+         rotational * (g[1, 0] * rhs[0] + g[1, 1] * rhs[1] + g[1, 2] * rhs[2] + g[1, 3] * rhs[3]),
+         rotational * (g[2, 0] * rhs[0] + g[2, 1] * rhs[1] + g[2, 2] * rhs[2] + g[2, 3] * rhs[3]))
+    along = normal * normal / c * (theta[0] * rhs[0] + theta[1] * rhs[1] + theta[2] * rhs[2]
+                                   + theta[3] * rhs[3])
+    z = (rotational * (inertia_inverse[0, 0] * y[0] + inertia_inverse[0, 1] * y[1]
+                       + inertia_inverse[0, 2] * y[2]),
+         rotational * (inertia_inverse[1, 0] * y[0] + inertia_inverse[1, 1] * y[1]
+                       + inertia_inverse[1, 2] * y[2]),
+         rotational * (inertia_inverse[2, 0] * y[0] + inertia_inverse[2, 1] * y[1]
+                       + inertia_inverse[2, 2] * y[2]))
+    for r in range(4):
+        out[i, start + r] = g[0, r] * z[0] + g[1, r] * z[1] + g[2, r] * z[2] + theta[r] * along
+
+
+@njit(cache=True, inline="always")
+def _block_solve_into(out, i, k, x, mass, theta, g, inertia_inverse, c):
+    """out[i, k:k + 7] = M'_b⁻¹ x[k:k + 7] for one Euler-parameter body whose coordinates start
+    at k: the translation divided by the mass, the rotation by :func:`_euler_block_solve_into`."""
+    for a in range(3):
+        out[i, k + a] = x[k + a] / mass
+    _euler_block_solve_into(out, i, k + 3, (x[k + 3], x[k + 4], x[k + 5], x[k + 6]), theta, g,
+                            inertia_inverse, c)
 
 
 @njit(cache=True)
-def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row, cut):
+def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row,
+                               sparsity_arrays, cut):
     """q̈ of the augmented system (002 eq. 77) for Euler-parameter bodies with a block-diagonal
     mass matrix, every constraint row included.
 
     The rotational block Ḡᵀ J̄ Ḡ is singular along θ; the normalisation row 2θᵀθ̈ = γ_θ fixes
     θᵀθ̈, so adding c θθᵀ to the block and c θ γ_θ/2 to the force leaves q̈ unchanged
     (c = 4 tr J̄ / 3, the mean of the block's other eigenvalues 4 J̄_i on the manifold).  The
-    block-diagonal M' is solved body by body (:func:`_euler_block_solve`), S = Φ_q M'⁻¹ Φ_qᵀ by
-    :func:`~adapters.inhouse.linalg.certified_spd_solve`.
+    block-diagonal M' is solved body by body (:func:`_block_solve_into`) for the rows of Φ_q
+    that touch the body (``sparsity_arrays``, :attr:`~adapters.inhouse.banded.Sparsity.arrays`),
+    S = Φ_q M'⁻¹ Φ_qᵀ by :func:`~adapters.inhouse.linalg.certified_spd_solve`.
 
     Returns
     -------
@@ -139,27 +145,56 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     for b in range(masses.shape[0]):
         if not _inertia_certified(masses[b], inertias[b], cut):
             return False, np.empty(0)
+    row_columns, body_row_start, body_rows = sparsity_arrays[0], sparsity_arrays[1], \
+        sparsity_arrays[2]
     n, m = q.shape[0], jac.shape[0]
-    rhs = np.empty((n, m + 1))
-    rhs[:, :m] = jac.T
-    rhs[:, m] = force
+    loaded = force.copy()
     for k in range(kind.shape[0]):
         if kind[k] == kernels.NORM:
             start = bi[k] * nc + 3
             weight = 4.0 * np.trace(inertias[bi[k]]) / 3.0 * 0.5 * target[row[k]]
-            rhs[start:start + 4, m] += weight * q[start:start + 4]
-    solved = np.empty((n, m + 1))
+            for a in range(4):
+                loaded[start + a] += weight * q[start + a]
+    free = np.empty((1, n))
+    weighted = np.zeros((m, n))  # Φ_q M'⁻¹: row i is (M'⁻¹ Φ_q[i]ᵀ)ᵀ
     for b in range(masses.shape[0]):
         k = b * nc
-        solved[k:k + 3] = rhs[k:k + 3] / masses[b]
-        _euler_block_solve(solved[k + 3:k + 7], rhs[k + 3:k + 7], q[k + 3:k + 7],
-                           _inverse_3x3(inertias[b]), 4.0 * np.trace(inertias[b]) / 3.0)
-    columns, free = np.ascontiguousarray(solved[:, :m]), np.ascontiguousarray(solved[:, m])
-    certified, mu = certified_spd_solve(sparse_left_product(jac, columns),
+        theta = q[k + 3:k + 7]
+        g, inertia_inverse = g_bar(theta), _inverse_3x3(inertias[b])
+        c = 4.0 * np.trace(inertias[b]) / 3.0
+        _block_solve_into(free, 0, k, loaded, masses[b], theta, g, inertia_inverse, c)
+        for p in range(body_row_start[b], body_row_start[b + 1]):
+            i = body_rows[p]
+            _block_solve_into(weighted, i, k, jac[i], masses[b], theta, g, inertia_inverse, c)
+    free = free[0]
+    certified, mu = certified_spd_solve(_gram_of_rows(jac, weighted, row_columns, nc),
                                         target - matvec(jac, free), cut)
     if not certified:
         return False, np.empty(0)
-    return True, free + matvec(columns, mu)
+    return True, free + rmatvec(weighted, mu)
+
+
+@njit(cache=True)
+def _gram_of_rows(jac, weighted, row_columns, nc):
+    """S = Φ_q (Φ_q M'⁻¹)ᵀ, shape (m, m), from ``weighted`` = Φ_q M'⁻¹ (m, n), both with the
+    row pattern ``row_columns``: entry (i, j) sums over the columns of row i in increasing order
+    (as a dense product would), skipping Φ_q's zeros and the columns row j does not touch."""
+    m = jac.shape[0]
+    gram = np.zeros((m, m))
+    for i in range(m):
+        first, second = row_columns[i, 0], row_columns[i, nc]
+        if second >= 0 and second < first:
+            first, second = second, first
+        for start in (first, second):
+            if start < 0:
+                continue
+            for c in range(start, start + nc):
+                x = jac[i, c]
+                if x == 0.0:
+                    continue
+                for j in range(m):
+                    gram[i, j] += x * weighted[j, c]
+    return gram
 
 
 @njit(cache=True)
@@ -525,7 +560,7 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
     if every_row and nc != PLANAR_NC:
         accepted, acceleration = spatial_block_acceleration(
             q, jac, force, target, nc, masses, inertias, constraint_args[1], constraint_args[2],
-            constraint_args[4], ACCELERATION_CUT)
+            constraint_args[4], sparsity_arrays, ACCELERATION_CUT)
         if accepted:
             return acceleration
     return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,

@@ -204,21 +204,6 @@ def weighted_gram(matrix, weights):
 
 
 @njit(cache=True)
-def sparse_left_product(left, right):
-    """left @ right, left (m, k), right (k, r), shape (m, r); plain loops, no BLAS call, the zero
-    entries of ``left`` (a constraint Jacobian's) skipped."""
-    m, k = left.shape
-    out = np.zeros((m, right.shape[1]))
-    for i in range(m):
-        for c in range(k):
-            if left[i, c] == 0.0:
-                continue
-            for j in range(right.shape[1]):
-                out[i, j] += left[i, c] * right[c, j]
-    return out
-
-
-@njit(cache=True)
 def matvec(matrix, x):
     """matrix @ x, matrix (m, n), x (n,), shape (m,); plain loops, no BLAS call."""
     m, n = matrix.shape
