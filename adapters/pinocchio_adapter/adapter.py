@@ -152,9 +152,10 @@ class _PinocchioStepper(Stepper):
             raise UnsupportedCase(str(exc)) from None
         self.data = model.model.createData()
         self._previous = start.quaternion  # fixes the sign of the first sampled quaternions
-        # Explicit one-step methods step unchecked between samples, replaying a failing step
-        # checked (the per-call NaN test and the integrator's bookkeeping cost ~9 µs a step,
-        # a fifth of the step); other methods step checked.
+        # Explicit one-step methods step unchecked between samples and check the state once per
+        # sample, replaying the sample's steps checked when it fails (the per-call NaN test and
+        # the integrator's bookkeeping cost ~9 µs a step, a fifth of the step); other methods
+        # step checked.
         self._unchecked_rule = (
             step_rule(type(self.integrator), self.problem, self.problem.counted_acceleration)
             if isinstance(self.integrator, NystromIntegrator) else None)
