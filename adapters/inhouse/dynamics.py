@@ -483,15 +483,19 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     -------
     ndarray, shape (n,)
     """
-    n, m = mass.shape[0], jacobian.shape[0]
-    if m > 0 and _is_positive_diagonal(mass):
-        # Planar bodies: M⁻¹ is exact and cheap; S = Φ_q M⁻¹ Φ_qᵀ.  When S is certified far from
-        # the cut the solution is the same as the M̃ form's (unique; to round-off).
-        inverse = 1.0 / np.diag(mass)
-        certified, mu = certified_spd_solve(weighted_gram(jacobian, inverse),
-                                            gamma - matvec(jacobian, inverse * force), cut)
+    if jacobian.shape[0] > 0 and _is_positive_diagonal(mass):
+        certified, acceleration = diagonal_mass_acceleration(1.0 / np.diag(mass), jacobian,
+                                                             force, gamma, cut)
         if certified:
-            return inverse * (force + rmatvec(jacobian, mu))
+            return acceleration
+    return augmented_mass_acceleration(mass, jacobian, force, gamma, cut)
+
+
+@njit(cache=True)
+def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
+    """q̈ of :func:`range_space_acceleration` by its M̃ form, with the truncated SVD where the
+    range-space matrix has no certificate, shape (n,)."""
+    n, m = mass.shape[0], jacobian.shape[0]
     scale = np.sum(jacobian * jacobian)
     rho = np.trace(mass) / scale if scale > 0.0 else 0.0
     augmented = mass + rho * (jacobian.T @ jacobian)
@@ -507,6 +511,25 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     if not certified:
         mu = truncated_solve(reduced, residual, cut)
     return free + columns @ mu
+
+
+@njit(cache=True)
+def diagonal_mass_acceleration(inverse, jacobian, force, gamma, cut):
+    """q̈ of :func:`range_space_acceleration` for a diagonal mass matrix (planar bodies), given
+    M⁻¹'s diagonal ``inverse`` (n,): M⁻¹ is exact and cheap, S = Φ_q M⁻¹ Φ_qᵀ.  When S is
+    certified far from the cut the solution is the same as the M̃ form's (unique; to round-off).
+
+    Returns
+    -------
+    certified : bool
+        False when S has no certificate (the caller then solves the M̃ form).
+    acceleration : ndarray, shape (n,) or (0,)
+    """
+    certified, mu = certified_spd_solve(weighted_gram(jacobian, inverse),
+                                        gamma - matvec(jacobian, inverse * force), cut)
+    if not certified:
+        return False, np.empty(0)
+    return True, inverse * (force + rmatvec(jacobian, mu))
 
 
 @njit(cache=True)
@@ -563,8 +586,17 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
             constraint_args[4], sparsity_arrays, ACCELERATION_CUT)
         if accepted:
             return acceleration
-    return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
-                                    ACCELERATION_CUT)
+    if nc != PLANAR_NC or jac.shape[0] == 0:
+        return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
+                                        ACCELERATION_CUT)
+    diagonal = planar_mass_diagonal(masses, inertias)  # range_space_acceleration's diagonal
+    if np.all(diagonal > 0.0):                          # branch without assembling M
+        accepted, acceleration = diagonal_mass_acceleration(1.0 / diagonal, jac, force, target,
+                                                            ACCELERATION_CUT)
+        if accepted:
+            return acceleration
+    return augmented_mass_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
+                                       ACCELERATION_CUT)
 
 
 @njit(cache=True)
