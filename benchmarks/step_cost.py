@@ -48,9 +48,9 @@ def _calls(piece, q, v, rows, constraint_args, dynamics_args, sparsity_arrays, n
     counters = np.zeros(4, dtype=np.int64)
     for _ in range(n):
         if piece == 0:
-            total += kernels.jacobian(q, 0.0, *constraint_args)[0, 0]
+            total += kernels.jacobian(q, 0.0, constraint_args)[0, 0]
         elif piece == 1:
-            total += kernels.gamma(q, v, 0.0, *constraint_args)[0]
+            total += kernels.gamma(q, v, 0.0, constraint_args)[0]
         elif piece == 2:
             total += forces_kernel(q, v, *dynamics_args)[0]
         elif piece == 3:

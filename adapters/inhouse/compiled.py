@@ -64,7 +64,7 @@ def _kept_rows(values, rows):
 @njit(cache=True)
 def _rows_jacobian(q, t, rows, constraint_args, counters):
     counters[JACOBIAN_EVALS] += 1
-    return _kept_rows(kernels.jacobian(q, t, *constraint_args), rows)
+    return _kept_rows(kernels.jacobian(q, t, constraint_args), rows)
 
 
 @njit(cache=True)
@@ -76,7 +76,7 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     the corrected configuration (:func:`~adapters.inhouse.banded.conditioning_indicator`)."""
     previous = np.inf
     for _ in range(proj_max_iter):
-        residual = _kept_rows(kernels.phi(q, t, *constraint_args), rows)
+        residual = _kept_rows(kernels.phi(q, t, constraint_args), rows)
         size = _max_abs(residual)
         if size < proj_tol or not size < previous:
             break
@@ -112,7 +112,7 @@ def expand(q_ind, v_ind, t, rows, constraint_args, partition, counters):
     converged = False
     residual = np.zeros(0)
     for _ in range(max_iter):
-        residual = _kept_rows(kernels.phi(q, t, *constraint_args), rows)
+        residual = _kept_rows(kernels.phi(q, t, constraint_args), rows)
         if _max_abs(residual) < tol:
             converged = True
             break

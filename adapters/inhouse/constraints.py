@@ -199,19 +199,19 @@ class ConstraintSystem:
 
     def phi(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Residuals, shape (m,)."""
-        return kernels.phi(q, t, *self._args)
+        return kernels.phi(q, t, self._args)
 
     def jacobian(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Φ_q, shape (m, n)."""
-        return kernels.jacobian(q, t, *self._args)
+        return kernels.jacobian(q, t, self._args)
 
     def phi_t(self, q: np.ndarray, t: float = 0.0) -> np.ndarray:
         """Φ_t, shape (m,)."""
-        return kernels.phi_t(q, t, *self._args)
+        return kernels.phi_t(q, t, self._args)
 
     def gamma(self, q: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
         """γ, shape (m,)."""
-        return kernels.gamma(q, v, t, *self._args)
+        return kernels.gamma(q, v, t, self._args)
 
 
 def _row_bodies(arrays: dict, m: int, dim: int) -> np.ndarray:

@@ -561,13 +561,13 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
     banded_spd_solve`), else by :func:`range_space_acceleration`.
     """
     every_row = rows.shape[0] == constraint_args[-1]
-    jac = kernels.jacobian(q, t, *constraint_args)
-    target = kernels.gamma(q, v, t, *constraint_args)
+    jac = kernels.jacobian(q, t, constraint_args)
+    target = kernels.gamma(q, v, t, constraint_args)
     if not every_row:
         jac, target = jac[rows], target[rows]
     row_columns = sparsity_arrays[0]
     if alpha != 0.0 or beta != 0.0:
-        residual = kernels.phi(q, t, *constraint_args)
+        residual = kernels.phi(q, t, constraint_args)
         if every_row:
             target = target - 2.0 * alpha * pattern_matvec(jac, row_columns, v) \
                 - beta * beta * residual
