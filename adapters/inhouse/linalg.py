@@ -247,8 +247,6 @@ def min_norm_solve_and_bound(matrix, rhs, cut):
         False when AAᵀ is not positive definite (the bound is then inf).
     bound : float
     """
-    if rhs.shape[0] == 0:
-        return np.zeros(matrix.shape[1]), True, 0.0
     positive, lower, bound = _certified_factor(weighted_gram(matrix, np.ones(matrix.shape[1])))
     if positive and bound * CERTIFICATE_MARGIN * (cut * cut) < 1.0:
         return rmatvec(matrix, _cholesky_solve(lower, rhs)), positive, bound

@@ -30,8 +30,8 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
 from adapters.integrators.base import SecondOrderSystem
-from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction,
-                                     min_norm_correction_and_indicator, pattern_matvec)
+from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction_and_indicator,
+                                     pattern_matvec)
 from adapters.inhouse.fold import SAFE_INDICATOR
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
@@ -315,10 +315,13 @@ class _Projection(Formulation):
         self.cut = float(self.params["singular_cut"]) * float(values[rank - 1] / values[0])
 
     def _min_norm(self, jac, residual):
-        """Φ_q⁺ r (eq. 126), truncated (see the class docstring)."""
+        """Φ_q⁺ r (eq. 126), truncated (see the class docstring), and ρ̂ of ``jac`` from the
+        same factorisation (:func:`~adapters.inhouse.banded.min_norm_correction_and_indicator`).
+        """
         self.counters["factorizations"] += 1
-        return min_norm_correction(np.ascontiguousarray(jac), np.ascontiguousarray(residual),
-                                   self.cut, self.constraints.sparsity.arrays)
+        return min_norm_correction_and_indicator(
+            np.ascontiguousarray(jac), np.ascontiguousarray(residual), self.cut,
+            self.constraints.sparsity.arrays)
 
     def warm_up(self, q, v):
         super().warm_up(q, v)
@@ -336,7 +339,7 @@ class _Projection(Formulation):
                 break
             previous = size
             self.counters["newton_iterations"] += 1
-            q = q - self._min_norm(self.jacobian(t, q), residual)
+            q = q - self._min_norm(self.jacobian(t, q), residual)[0]
         return q
 
 
@@ -356,10 +359,8 @@ class DirectCorrection(_Projection):
     def project(self, t, q, v):
         q = self.project_position(t, q)
         jac = np.ascontiguousarray(self.jacobian(t, q))
-        self.counters["factorizations"] += 1
-        correction, indicator = min_norm_correction_and_indicator(
-            jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v), self.cut,
-            self.constraints.sparsity.arrays)
+        correction, indicator = self._min_norm(
+            jac, pattern_matvec(jac, self.constraints.sparsity.row_columns, v))
         self._push_indicator(indicator)
         return q, v - correction
 
