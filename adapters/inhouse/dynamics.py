@@ -33,13 +33,19 @@ from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, Spri
 
 @njit(cache=True, inline="always")
 def g_bar(theta):
-    """Ḡ = 2Ē of 002 eq. 28, shape (3, 4)."""
-    t0, t1, t2, t3 = theta[0], theta[1], theta[2], theta[3]
-    g = np.empty((3, 4))
-    g[0, 0], g[0, 1], g[0, 2], g[0, 3] = -2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2
-    g[1, 0], g[1, 1], g[1, 2], g[1, 3] = -2.0 * t2, -2.0 * t3, 2.0 * t0, 2.0 * t1
-    g[2, 0], g[2, 1], g[2, 2], g[2, 3] = -2.0 * t3, 2.0 * t2, -2.0 * t1, 2.0 * t0
-    return g
+    """Ḡ = 2Ē of 002 eq. 28, shape (3, 4): the array form of :func:`_g_bar_rows`."""
+    return np.array(_g_bar_rows(theta, 0))
+
+
+@njit(cache=True, inline="always")
+def _g_bar_rows(q, start):
+    """The rows of Ḡ = 2Ē (002 eq. 28) of θ = q[start:start + 4], three tuples (4): the form
+    the force kernels use (tuples, not a scratch array: :mod:`adapters.inhouse.bodykin` says
+    why)."""
+    t0, t1, t2, t3 = q[start], q[start + 1], q[start + 2], q[start + 3]
+    return ((-2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2),
+            (-2.0 * t2, -2.0 * t3, 2.0 * t0, 2.0 * t1),
+            (-2.0 * t3, 2.0 * t2, -2.0 * t1, 2.0 * t0))
 
 
 @njit(cache=True)
@@ -155,7 +161,7 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
             weight = 4.0 * np.trace(inertias[bi[k]]) / 3.0 * 0.5 * target[row[k]]
             for a in range(4):
                 loaded[start + a] += weight * q[start + a]
-    free = np.empty((1, n))
+    free = np.empty((1, n))  # M'⁻¹ (Q + the θ terms), one row so as to be written like `weighted`
     weighted = np.zeros((m, n))  # Φ_q M'⁻¹: row i is (M'⁻¹ Φ_q[i]ᵀ)ᵀ
     for b in range(masses.shape[0]):
         k = b * nc
@@ -252,16 +258,6 @@ def _inertial_forces(q, v, nc, masses, gravity, inertias):
 def _cross(a, b):
     """a × b of two tuples (3), a tuple (3)."""
     return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-
-
-@njit(cache=True, inline="always")
-def _g_bar_rows(q, start):
-    """The rows of Ḡ (:func:`g_bar`) of θ = q[start:start + 4], three tuples (4): the force
-    kernels' form (tuples, not a scratch array: :mod:`adapters.inhouse.bodykin` says why)."""
-    t0, t1, t2, t3 = q[start], q[start + 1], q[start + 2], q[start + 3]
-    return ((-2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2),
-            (-2.0 * t2, -2.0 * t3, 2.0 * t0, 2.0 * t1),
-            (-2.0 * t3, 2.0 * t2, -2.0 * t1, 2.0 * t0))
 
 
 @njit(cache=True, inline="always")
