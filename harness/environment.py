@@ -3,7 +3,9 @@ of the packages that compute results, and the machine."""
 
 from __future__ import annotations
 
+import hashlib
 import importlib.metadata
+import json
 import os
 import platform
 import re
@@ -15,6 +17,9 @@ RECORDED_PACKAGES = ("numpy", "scipy", "pandas", "pyarrow", "mujoco", "pin", "ex
                      "pybullet", "scikit-sundae", "numba")
 
 _REPO = Path(__file__).resolve().parent.parent
+#: The project's packages whose code computes a case's row (the engines' calls, the measuring
+#: stick, the metrics).
+COMPUTING_PACKAGES = ("harness", "adapters")
 
 
 def _git(*args: str) -> str | None:
@@ -43,6 +48,18 @@ def package_versions() -> dict[str, str | None]:
         except importlib.metadata.PackageNotFoundError:
             versions[name] = None
     return versions
+
+
+def code_fingerprint() -> str:
+    """SHA-256 (hex) of what computes a case's row besides its inputs: the path and content of
+    every Python file of :data:`COMPUTING_PACKAGES` and :func:`package_versions`.  Any edit to the
+    harness or an adapter, or another numpy, numba or engine version, changes it."""
+    digest = hashlib.sha256(json.dumps(package_versions(), sort_keys=True).encode())
+    for package in COMPUTING_PACKAGES:
+        for path in sorted((_REPO / package).rglob("*.py")):
+            digest.update(path.relative_to(_REPO).as_posix().encode() + b"\0")
+            digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
 
 
 def _cpu_model() -> str:

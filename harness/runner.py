@@ -10,7 +10,9 @@ Stages of :func:`run_campaign`, in order:
    is stored as the run's machine-speed figure (times of different runs compare as ratios to it);
 4. the cases run through :func:`harness.execute.execute` (one fresh process each) and are stored
    as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.CaseCache`
-   is copied instead of run, and every run case is offered to the cache;
+   (same scenario content, engine version, method, step and duration, computed by the same code
+   under the same bounds and accuracy) is copied instead of run, and every run case is offered
+   to the cache;
 5. the optional stability sweep (:mod:`harness.sweep`) runs through the same executor;
 6. the run is marked ``complete``.
 
@@ -22,11 +24,14 @@ the run ``interrupted`` (every finished case stays stored) and raises :class:`Ca
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import math
 import sys
 from dataclasses import dataclass
 
 from harness import scenario
+from harness.environment import code_fingerprint
 from harness.execute import execute, usable_cores
 from harness.reference import ReferenceError, reference_trajectory
 from harness.store import CaseCache, RunStore
@@ -118,14 +123,18 @@ def _open_store(campaign, resume: str | None, root) -> RunStore:
 
 
 class _Recorder:
-    """Stores each finished case (and offers it to the cache)."""
+    """Stores each finished case (and offers it to the cache).
 
-    def __init__(self, store: RunStore, cache: CaseCache, keys: dict):
-        self.store, self.cache, self.keys = store, cache, keys
+    ``keys`` maps scenario names to content hashes and adapter names to versions; ``settings``
+    is the cache's last key part (:func:`_cache_settings`)."""
 
-    def key(self, spec) -> tuple[str, str]:
-        """(scenario content hash, adapter version) of ``spec``, the cache's key parts."""
-        return self.keys[spec.scenario], self.keys[spec.adapter]
+    def __init__(self, store: RunStore, cache: CaseCache, keys: dict, settings: str):
+        self.store, self.cache, self.keys, self.settings = store, cache, keys, settings
+
+    def key(self, spec) -> tuple[str, str, str]:
+        """(scenario content hash, adapter version, settings) of ``spec``, the cache's key
+        parts."""
+        return self.keys[spec.scenario], self.keys[spec.adapter], self.settings
 
     def record(self, spec, row: dict, trajectory) -> None:
         self.store.add(row, trajectory)
@@ -150,6 +159,14 @@ def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
     keys = {name: scenario.load(name).content_hash for name in names}
     keys.update({name: get_adapter(name).version() for name in adapters})
     return keys
+
+
+def _cache_settings(campaign) -> str:
+    """What a cached row depends on besides its case and engine: the harness's and adapters'
+    code (:func:`~harness.environment.code_fingerprint`), the verdict's bounds and the accuracy
+    the campaign judges ``accurate`` by; a row computed under other settings is not reused."""
+    return json.dumps({"code": code_fingerprint(), "bounds": dataclasses.asdict(campaign.bounds),
+                       "accuracy": campaign.accuracy}, sort_keys=True)
 
 
 def _calibrate(store: RunStore, work, scheduler, say) -> None:
@@ -248,7 +265,8 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]
         recorder = _Recorder(store, CaseCache(root), _cache_keys(
-            {spec.scenario for spec in todo}, {spec.adapter for spec in todo}))
+            {spec.scenario for spec in todo}, {spec.adapter for spec in todo}),
+            _cache_settings(campaign))
         if reuse:
             todo = recorder.reuse(todo)
         execute(todo, work, workers=workers, scheduler=scheduler, on_result=recorder.record,

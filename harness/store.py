@@ -475,7 +475,7 @@ class CaseCache:
     """Rows and trajectories of finished cases, reusable by any run (``mbh run --reuse``).
 
     An entry is keyed by (scenario content hash, adapter name, adapter version, method string,
-    dt, t_end) and lives in ``<root>/cache/<key hash>/`` (row.parquet + trajectory.npz),
+    dt, t_end, settings) and lives in ``<root>/cache/<key hash>/`` (row.parquet + trajectory.npz),
     written in a temp folder and renamed into place.  Rows with a status of
     :data:`UNCACHED_STATUSES` are not kept.
 
@@ -489,20 +489,22 @@ class CaseCache:
         self.folder = _root(root) / "cache"
 
     @staticmethod
-    def key(spec, scenario_hash: str, adapter_version: str) -> str:
-        """The entry name of ``spec`` (a CaseSpec: scenario, adapter, method, dt, t_end)."""
+    def key(spec, scenario_hash: str, adapter_version: str, settings: str) -> str:
+        """The entry name of ``spec`` (a CaseSpec: scenario, adapter, method, dt, t_end);
+        ``settings`` is everything else the row depends on (the runner's: the code fingerprint,
+        the verdict's bounds and the campaign's accuracy)."""
         parts = [scenario_hash, spec.adapter, str(adapter_version), spec.method,
-                 repr(float(spec.dt)), repr(float(spec.t_end))]
+                 repr(float(spec.dt)), repr(float(spec.t_end)), settings]
         return hashlib.sha256(json.dumps(parts).encode()).hexdigest()
 
-    def lookup(self, spec, scenario_hash: str,
-               adapter_version: str) -> tuple[dict, Trajectory | None] | None:
+    def lookup(self, spec, scenario_hash: str, adapter_version: str,
+               settings: str) -> tuple[dict, Trajectory | None] | None:
         """The row and trajectory stored for an identical case, or None.
 
         The row comes back as it was put, with ``reused_from`` set to the run that computed it
         (``"cache"`` when unknown) and without the store's ``run_id``/``trajectory_file``.
         """
-        entry = self.folder / self.key(spec, scenario_hash, adapter_version)
+        entry = self.folder / self.key(spec, scenario_hash, adapter_version, settings)
         if not (entry / "row.parquet").is_file():
             return None
         row = _read_table(entry / "row.parquet", SCHEMA_VERSION).to_pylist()[0]
@@ -512,12 +514,12 @@ class CaseCache:
         row.pop("trajectory_file", None)
         return row, trajectory
 
-    def put(self, spec, scenario_hash: str, adapter_version: str, row: dict,
+    def put(self, spec, scenario_hash: str, adapter_version: str, settings: str, row: dict,
             trajectory: Trajectory | None, run_id: str | None = None) -> None:
         """Keep ``row`` and ``trajectory`` for ``spec`` (first writer wins; see the class)."""
         if row.get("status") in UNCACHED_STATUSES:
             return
-        name = self.key(spec, scenario_hash, adapter_version)
+        name = self.key(spec, scenario_hash, adapter_version, settings)
         entry = self.folder / name
         if entry.is_dir():
             return

@@ -21,11 +21,13 @@ import pandas as pd
 import pytest
 
 from adapters import adapter_names
+from harness import environment
 from harness.campaign import load_campaign
 from harness.runner import CaseWork, run_campaign
 from harness.sampling import EVALUATION_STEP
 from harness.store import RunStore, list_runs
 from harness.sweep import Bisection, stability_sweep
+from harness.verdict import Bounds
 
 MBH = [sys.executable, "-m", "harness.cli"]
 
@@ -249,6 +251,31 @@ def test_reuse_copies_identical_cases_instead_of_running_them(tmp_path, results)
     pd.testing.assert_frame_equal(metric_rows(first),
                                   metric_rows(again).drop(columns="reused_from"),
                                   check_exact=True)
+
+
+@pytest.mark.parametrize("change", [{"accuracy": 1e-9}, {"bounds": Bounds(gap=1e-2)}])
+def test_reuse_takes_no_case_judged_under_other_settings(tmp_path, results, change):
+    """A cached row's status and ``accurate`` flag were judged under its campaign's bounds and
+    accuracy; a campaign with others must run the case again."""
+    campaign = load_campaign(write_campaign(tmp_path, "tiny", TINY))
+    campaign = replace(campaign, cases=campaign.cases[:1], calibration=False)
+    run_campaign(campaign, workers=1, quiet=True)
+    again = run_campaign(replace(campaign, **change), workers=1, quiet=True, reuse=True)
+    reused = again.cases().get("reused_from")
+    assert reused is None or reused.isna().all()
+
+
+def test_the_code_fingerprint_follows_the_sources(tmp_path, monkeypatch):
+    """Any edit of a computing package's file changes the fingerprint (so no cached row
+    outlives the code that computed it)."""
+    for package in environment.COMPUTING_PACKAGES:
+        (tmp_path / package).mkdir()
+        (tmp_path / package / "module.py").write_text("x = 1\n")
+    monkeypatch.setattr(environment, "_REPO", tmp_path)
+    before = environment.code_fingerprint()
+    assert environment.code_fingerprint() == before
+    (tmp_path / environment.COMPUTING_PACKAGES[-1] / "module.py").write_text("x = 2\n")
+    assert environment.code_fingerprint() != before
 
 
 def mbh(*args, root: Path, **options) -> subprocess.CompletedProcess:

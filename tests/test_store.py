@@ -326,10 +326,10 @@ def test_cache_hits_an_identical_case_and_misses_on_every_key_part(root):
     spec = SPECS[1]
     row = row_for(spec, error_crank_angle=float("nan"), accurate=None, steps=None)
     stored = trajectory(wall_time_s=0.1)
-    assert cache.lookup(spec, "hash0", "1.0") is None
-    cache.put(spec, "hash0", "1.0", row, stored, run_id="run-1")
+    assert cache.lookup(spec, "hash0", "1.0", "s0") is None
+    cache.put(spec, "hash0", "1.0", "s0", row, stored, run_id="run-1")
 
-    hit_row, hit_trajectory = cache.lookup(spec, "hash0", "1.0")
+    hit_row, hit_trajectory = cache.lookup(spec, "hash0", "1.0", "s0")
     assert hit_row["reused_from"] == "run-1"
     for key, value in row.items():
         same = (value == hit_row[key]) or (value != value and hit_row[key] != hit_row[key])
@@ -337,27 +337,28 @@ def test_cache_hits_an_identical_case_and_misses_on_every_key_part(root):
     np.testing.assert_array_equal(hit_trajectory.position, stored.position)
 
     other = {"adapter": "mujoco", "method": "rk4+direct", "dt": 0.005, "t_end": 2.0}
-    misses = [(spec, "hash1", "1.0"), (spec, "hash0", "1.1")] + [
-        (replace(spec, **{part: value}), "hash0", "1.0")
+    misses = [(spec, "hash1", "1.0", "s0"), (spec, "hash0", "1.1", "s0"),
+              (spec, "hash0", "1.0", "s1")] + [
+        (replace(spec, **{part: value}), "hash0", "1.0", "s0")
         for part, value in other.items()]
     for key in misses:
         assert cache.lookup(*key) is None, key
     # the scenario name is not part of the key: the content hash is
     renamed = replace(spec, scenario="fourbar_copy")
-    assert cache.lookup(renamed, "hash0", "1.0") is not None
+    assert cache.lookup(renamed, "hash0", "1.0", "s0") is not None
 
 
 def test_cache_keeps_the_first_entry_and_skips_machine_dependent_statuses(root):
     cache = store.CaseCache()
     spec = SPECS[0]
-    cache.put(spec, "h", "1", row_for(spec, wall_time_s=1.0), None)
-    cache.put(spec, "h", "1", row_for(spec, wall_time_s=9.0), None)
-    hit_row, hit_trajectory = cache.lookup(spec, "h", "1")
+    cache.put(spec, "h", "1", "s", row_for(spec, wall_time_s=1.0), None)
+    cache.put(spec, "h", "1", "s", row_for(spec, wall_time_s=9.0), None)
+    hit_row, hit_trajectory = cache.lookup(spec, "h", "1", "s")
     assert hit_row["wall_time_s"] == 1.0 and hit_trajectory is None
     assert hit_row["reused_from"] == "cache"
     for status in store.UNCACHED_STATUSES:
-        cache.put(spec, "h", status, row_for(spec, status=status), None)
-        assert cache.lookup(spec, "h", status) is None
+        cache.put(spec, "h", status, "s", row_for(spec, status=status), None)
+        assert cache.lookup(spec, "h", status, "s") is None
     assert not [p for p in (root / "cache").iterdir() if p.name.startswith(".")]
 
 
@@ -366,9 +367,9 @@ def test_a_cached_row_stored_again_carries_the_new_run_id(root):
     cache = store.CaseCache()
     spec = SPECS[0]
     run.add(row_for(spec), trajectory())
-    cache.put(spec, "h", "1", row_for(spec), trajectory(), run_id=run.run_id)
+    cache.put(spec, "h", "1", "s", row_for(spec), trajectory(), run_id=run.run_id)
     again = store.RunStore.create(campaign())
-    hit_row, hit_trajectory = cache.lookup(spec, "h", "1")
+    hit_row, hit_trajectory = cache.lookup(spec, "h", "1", "s")
     again.add(hit_row, hit_trajectory)
     frame = again.cases()
     assert frame["run_id"].iloc[0] == again.run_id and frame["reused_from"].iloc[0] == run.run_id
