@@ -253,8 +253,8 @@ def test_a_shipped_campaign_makes_a_run(root):
     spec = shipped.cases[-1]
     np.testing.assert_array_equal(run.trajectory(spec.case_id).times, trajectory().times)
     cache = store.CaseCache()
-    cache.put(spec, "h", "1", row_for(spec), None)
-    assert cache.lookup(spec, "h", "1")[0]["case_id"] == spec.case_id
+    cache.put(spec, "h", "1", "s", row_for(spec), None)
+    assert cache.lookup(spec, "h", "1", "s")[0]["case_id"] == spec.case_id
 
 
 def test_git_state_without_git_is_unknown(monkeypatch):
