@@ -90,23 +90,32 @@ def _inverse_3x3(matrix):
 
 
 @njit(cache=True, inline="always")
-def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, c):
+def _euler_block_scales(theta, c):
+    """(1/(4|θ|²), 1/(c|θ|⁴)) of :func:`_euler_block_solve_into` for θ (4,) and c > 0: the same
+    for every row of one body, so computed once per body."""
+    size = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2] \
+        + theta[3] * theta[3]
+    normal = 1.0 / size
+    return 1.0 / (4.0 * size), normal * normal / c
+
+
+@njit(cache=True, inline="always")
+def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, scales):
     """out[i, start:start + 4] = B⁻¹ rhs for the rotational block B = Ḡᵀ J̄ Ḡ + c θθᵀ of one
-    body, rhs a tuple (4), θ (4,), ``g`` = Ḡ(θ) (3, 4), ``inertia_inverse`` J̄⁻¹ (3, 3), c > 0.
+    body, rhs a tuple (4), θ (4,), ``g`` = Ḡ(θ) (3, 4), ``inertia_inverse`` J̄⁻¹ (3, 3),
+    ``scales`` = :func:`_euler_block_scales` (θ, c), c > 0.
 
     With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
     length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
     and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: two products with E and one with J̄⁻¹, instead of
     assembling B and factorising it.
     """
-    size = theta[0] * theta[0] + theta[1] * theta[1] + theta[2] * theta[2] \
-        + theta[3] * theta[3]
-    rotational, normal = 1.0 / (4.0 * size), 1.0 / size
+    rotational, along_scale = scales
     y = (rotational * (g[0, 0] * rhs[0] + g[0, 1] * rhs[1] + g[0, 2] * rhs[2] + g[0, 3] * rhs[3]),
          rotational * (g[1, 0] * rhs[0] + g[1, 1] * rhs[1] + g[1, 2] * rhs[2] + g[1, 3] * rhs[3]),
          rotational * (g[2, 0] * rhs[0] + g[2, 1] * rhs[1] + g[2, 2] * rhs[2] + g[2, 3] * rhs[3]))
-    along = normal * normal / c * (theta[0] * rhs[0] + theta[1] * rhs[1] + theta[2] * rhs[2]
-                                   + theta[3] * rhs[3])
+    along = along_scale * (theta[0] * rhs[0] + theta[1] * rhs[1] + theta[2] * rhs[2]
+                           + theta[3] * rhs[3])
     z = (rotational * (inertia_inverse[0, 0] * y[0] + inertia_inverse[0, 1] * y[1]
                        + inertia_inverse[0, 2] * y[2]),
          rotational * (inertia_inverse[1, 0] * y[0] + inertia_inverse[1, 1] * y[1]
@@ -118,13 +127,13 @@ def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, c):
 
 
 @njit(cache=True, inline="always")
-def _block_solve_into(out, i, k, x, mass, theta, g, inertia_inverse, c):
+def _block_solve_into(out, i, k, x, mass, theta, g, inertia_inverse, scales):
     """out[i, k:k + 7] = M'_b⁻¹ x[k:k + 7] for one Euler-parameter body whose coordinates start
     at k: the translation divided by the mass, the rotation by :func:`_euler_block_solve_into`."""
     for a in range(3):
         out[i, k + a] = x[k + a] / mass
     _euler_block_solve_into(out, i, k + 3, (x[k + 3], x[k + 4], x[k + 5], x[k + 6]), theta, g,
-                            inertia_inverse, c)
+                            inertia_inverse, scales)
 
 
 @njit(cache=True)
@@ -166,11 +175,12 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
         k = b * nc
         theta = q[k + 3:k + 7]
         g, inertia_inverse = g_bar(theta), _inverse_3x3(inertias[b])
-        c = 4.0 * np.trace(inertias[b]) / 3.0
-        _block_solve_into(free, 0, k, loaded, masses[b], theta, g, inertia_inverse, c)
+        scales = _euler_block_scales(theta, 4.0 * np.trace(inertias[b]) / 3.0)
+        _block_solve_into(free, 0, k, loaded, masses[b], theta, g, inertia_inverse, scales)
         for p in range(body_row_start[b], body_row_start[b + 1]):
             i = body_rows[p]
-            _block_solve_into(weighted, i, k, jac[i], masses[b], theta, g, inertia_inverse, c)
+            _block_solve_into(weighted, i, k, jac[i], masses[b], theta, g, inertia_inverse,
+                              scales)
     free = free[0]
     certified, mu = certified_spd_solve(_gram_of_rows(jac, weighted, sparsity_arrays[0], nc),
                                         target - matvec(jac, free), cut)
