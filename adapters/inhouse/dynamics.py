@@ -71,22 +71,22 @@ def _determinant_3x3(a):
             + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
 
 
-@njit(cache=True)
-def _inverse_3x3(matrix):
-    """Inverse of a (3, 3) matrix by its adjugate, shape (3, 3); only called on inertias that
-    :func:`_inertia_certified` accepted (condition below 1/cut)."""
-    a = matrix
-    inverse = np.empty((3, 3))
-    inverse[0, 0] = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
-    inverse[0, 1] = a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]
-    inverse[0, 2] = a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]
-    inverse[1, 0] = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
-    inverse[1, 1] = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
-    inverse[1, 2] = a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]
-    inverse[2, 0] = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
-    inverse[2, 1] = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
-    inverse[2, 2] = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
-    return inverse / _determinant_3x3(a)
+@njit(cache=True, inline="always")
+def _inverse_3x3_rows(a):
+    """Inverse of a (3, 3) matrix by its adjugate, three row tuples (3) (no array to allocate on
+    every right-hand side); only called on inertias that :func:`_inertia_certified` accepted
+    (condition below 1/cut)."""
+    det = _determinant_3x3(a)
+    first = ((a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]) / det,
+             (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det,
+             (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det)
+    second = ((a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]) / det,
+              (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det,
+              (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det)
+    third = ((a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]) / det,
+             (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det,
+             (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det)
+    return first, second, third
 
 
 @njit(cache=True, inline="always")
@@ -102,8 +102,9 @@ def _euler_block_scales(theta, c):
 @njit(cache=True, inline="always")
 def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, scales):
     """out[i, start:start + 4] = B⁻¹ rhs for the rotational block B = Ḡᵀ J̄ Ḡ + c θθᵀ of one
-    body, rhs a tuple (4), θ (4,), ``g`` = Ḡ(θ) (3, 4), ``inertia_inverse`` J̄⁻¹ (3, 3),
-    ``scales`` = :func:`_euler_block_scales` (θ, c), c > 0.
+    body, rhs a tuple (4), θ (4,), ``g`` = Ḡ(θ) and ``inertia_inverse`` = J̄⁻¹ as row tuples
+    (:func:`_g_bar_rows`, :func:`_inverse_3x3_rows`), ``scales`` = :func:`_euler_block_scales`
+    (θ, c), c > 0.
 
     With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
     length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
@@ -111,19 +112,19 @@ def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, scale
     assembling B and factorising it.
     """
     rotational, along_scale = scales
-    y = (rotational * (g[0, 0] * rhs[0] + g[0, 1] * rhs[1] + g[0, 2] * rhs[2] + g[0, 3] * rhs[3]),
-         rotational * (g[1, 0] * rhs[0] + g[1, 1] * rhs[1] + g[1, 2] * rhs[2] + g[1, 3] * rhs[3]),
-         rotational * (g[2, 0] * rhs[0] + g[2, 1] * rhs[1] + g[2, 2] * rhs[2] + g[2, 3] * rhs[3]))
+    y = (rotational * (g[0][0] * rhs[0] + g[0][1] * rhs[1] + g[0][2] * rhs[2] + g[0][3] * rhs[3]),
+         rotational * (g[1][0] * rhs[0] + g[1][1] * rhs[1] + g[1][2] * rhs[2] + g[1][3] * rhs[3]),
+         rotational * (g[2][0] * rhs[0] + g[2][1] * rhs[1] + g[2][2] * rhs[2] + g[2][3] * rhs[3]))
     along = along_scale * (theta[0] * rhs[0] + theta[1] * rhs[1] + theta[2] * rhs[2]
                            + theta[3] * rhs[3])
-    z = (rotational * (inertia_inverse[0, 0] * y[0] + inertia_inverse[0, 1] * y[1]
-                       + inertia_inverse[0, 2] * y[2]),
-         rotational * (inertia_inverse[1, 0] * y[0] + inertia_inverse[1, 1] * y[1]
-                       + inertia_inverse[1, 2] * y[2]),
-         rotational * (inertia_inverse[2, 0] * y[0] + inertia_inverse[2, 1] * y[1]
-                       + inertia_inverse[2, 2] * y[2]))
+    z = (rotational * (inertia_inverse[0][0] * y[0] + inertia_inverse[0][1] * y[1]
+                       + inertia_inverse[0][2] * y[2]),
+         rotational * (inertia_inverse[1][0] * y[0] + inertia_inverse[1][1] * y[1]
+                       + inertia_inverse[1][2] * y[2]),
+         rotational * (inertia_inverse[2][0] * y[0] + inertia_inverse[2][1] * y[1]
+                       + inertia_inverse[2][2] * y[2]))
     for r in range(4):
-        out[i, start + r] = g[0, r] * z[0] + g[1, r] * z[1] + g[2, r] * z[2] + theta[r] * along
+        out[i, start + r] = g[0][r] * z[0] + g[1][r] * z[1] + g[2][r] * z[2] + theta[r] * along
 
 
 @njit(cache=True, inline="always")
@@ -174,7 +175,7 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     for b in range(masses.shape[0]):
         k = b * nc
         theta = q[k + 3:k + 7]
-        g, inertia_inverse = g_bar(theta), _inverse_3x3(inertias[b])
+        g, inertia_inverse = _g_bar_rows(q, k + 3), _inverse_3x3_rows(inertias[b])
         scales = _euler_block_scales(theta, 4.0 * np.trace(inertias[b]) / 3.0)
         _block_solve_into(free, 0, k, loaded, masses[b], theta, g, inertia_inverse, scales)
         for p in range(body_row_start[b], body_row_start[b + 1]):
