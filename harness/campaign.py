@@ -16,7 +16,8 @@ File format (times in s)::
     calibration = true            # run the calibration case (harness.case_row.calibration_spec)
 
     [bounds]                      # optional: the verdict's bounds (harness.verdict.Bounds fields)
-    gap = 5e-3                    # gap, orientation, energy, branch; positive; unnamed: defaults
+    gap = 5e-3                    # gap, orientation, energy, branch, trajectory; positive;
+                                  # unnamed: defaults
     energy = 5e-2
 
     [t_end]                       # optional: duration overrides, s, per scenario name;
