@@ -235,8 +235,8 @@ def _trajectory_check(mech: Mechanism, trajectory: Trajectory, reference: Trajec
     if not covered.all():
         notes.append(f"motion not compared with the reference after t = "
                      f"{reference.times[-1]:.6g} s, where the reference ends")
-    run_markers, body_of = markers(mech, _prefix(trajectory, int(covered.sum())))
-    apart = np.linalg.norm(run_markers - markers(mech, reference)[0][index], axis=-1)
+    run_markers, body_of = markers(mech, _samples(trajectory, covered))
+    apart = np.linalg.norm(run_markers - markers(mech, _samples(reference, index))[0], axis=-1)
     worst = apart.argmax(axis=1)
     distance = np.zeros(trajectory.n_samples)
     distance[:worst.size] = apart[np.arange(worst.size), worst]
@@ -286,7 +286,8 @@ def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None 
     checks = [finite]
     with np.errstate(all="ignore"):  # a run growing without bound overflows its energy
         if reached:
-            checks += _stick_checks(mech, _prefix(trajectory, reached), reference, bounds, notes)
+            checks += _stick_checks(mech, _samples(trajectory, slice(reached)), reference,
+                                     bounds, notes)
     ratios = np.zeros((len(checks), trajectory.n_samples))
     for row, check in zip(ratios, checks):
         row[:check.ratio.size] = np.nan_to_num(check.ratio, nan=np.inf)
@@ -305,10 +306,10 @@ def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None 
                                notes=notes)
 
 
-def _prefix(trajectory: Trajectory, n: int) -> Trajectory:
-    """The first n samples (the finite ones) as a trajectory."""
-    return dataclasses.replace(trajectory, times=trajectory.times[:n],
-                               position=trajectory.position[:n],
-                               quaternion=trajectory.quaternion[:n],
-                               velocity=trajectory.velocity[:n],
-                               angular_velocity=trajectory.angular_velocity[:n])
+def _samples(trajectory: Trajectory, selection) -> Trajectory:
+    """The samples ``selection`` (a slice or an index array) as a trajectory."""
+    return dataclasses.replace(trajectory, times=trajectory.times[selection],
+                               position=trajectory.position[selection],
+                               quaternion=trajectory.quaternion[selection],
+                               velocity=trajectory.velocity[selection],
+                               angular_velocity=trajectory.angular_velocity[selection])
