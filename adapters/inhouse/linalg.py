@@ -189,8 +189,9 @@ def certified_spd_solve(matrix, rhs, cut):
 
 @njit(cache=True)
 def _certified_factor(matrix):
-    """The Cholesky factor of a symmetric matrix (k, k) and the certificate's bound
-    ‖S‖_F ‖L⁻¹‖_F² ≥ κ₂(S) (:func:`certified_spd_solve`).
+    """The Cholesky factor of a symmetric matrix (k, k) and the Frobenius form of the
+    certificate's bound, ‖S‖_F ‖L⁻¹‖_F² ≥ κ₂(S) (:func:`certified_spd_solve`): the form whose
+    value the conditioning indicator ρ̂ is made of, so the projections keep it.
 
     Returns
     -------
@@ -207,8 +208,8 @@ def _certified_factor(matrix):
 
 @njit(cache=True)
 def gram_condition_bound(matrix):
-    """The bound of :func:`certified_spd_solve` on κ₂(A Aᵀ), A = ``matrix`` (m, n):
-    ‖S‖_F ‖L⁻¹‖_F² with S = A Aᵀ = L Lᵀ.
+    """The Frobenius form of :func:`certified_spd_solve`'s bound on κ₂(A Aᵀ), A = ``matrix``
+    (m, n): ‖S‖_F ‖L⁻¹‖_F² with S = A Aᵀ = L Lᵀ (:func:`_certified_factor`).
 
     Returns
     -------
@@ -266,8 +267,8 @@ def rmatvec(matrix, y):
 @njit(cache=True)
 def min_norm_solve(matrix, rhs, cut):
     """:func:`truncated_solve` of a wide matrix (m, n), m ≤ n, rhs (m,), by the normal equations
-    x = Aᵀ(AAᵀ)⁻¹ rhs when :func:`certified_spd_solve` certifies AAᵀ at cut² (σ(AAᵀ) = σ(A)²), else
-    by the truncated SVD itself, shape (n,)."""
+    x = Aᵀ(AAᵀ)⁻¹ rhs when the Frobenius form of the certificate (:func:`_certified_factor`)
+    certifies AAᵀ at cut² (σ(AAᵀ) = σ(A)²), else by the truncated SVD itself, shape (n,)."""
     return min_norm_solve_and_bound(matrix, rhs, cut)[0]
 
 
