@@ -20,7 +20,7 @@ reading its state moves the Newton start of the dependent coordinates.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -162,7 +162,8 @@ class CompiledStepper(FormulationStepper):
             q, v, 0.0, self.grid.dt, first, targets, self._tableau, self._model, self._code,
             self._projection, self._partition, self._check_due, self._limit,
             self.passages.arrays, self._counters, q_out, v_out)
-        return _Samples(targets[:reached], q_out[:reached], v_out[:reached], (q, v, done, status))
+        row = {step: k for k, step in enumerate(targets[:reached].tolist())}
+        return _Samples(row, q_out[:reached], v_out[:reached], (q, v, done, status))
 
     def _take_sample(self, target: int) -> None:
         """Make the stored state of step ``target`` current, or raise the run's failure."""
@@ -223,25 +224,20 @@ class _Samples:
 
     Attributes
     ----------
-    steps : ndarray of int64, shape (k,)
-        The step indices reached, increasing.
+    row : dict
+        Step index → row of ``q`` and ``v``, for the k steps reached (a dict lookup per sample
+        costs a tenth of a search in an array of the steps; the per-sample Python is the
+        in-house overhead at large steps).
     q, v : ndarray, shape (k, n)
         The integrated state after each.
     end : tuple
         (q, v, done, status) of the call: the last good state, its step and why it stopped.
-    row : dict
-        Row of ``q`` and ``v`` of each stored step (a dict lookup per sample costs a tenth of a
-        search in ``steps``; the per-sample Python is the in-house overhead at large steps).
     """
 
-    steps: np.ndarray
+    row: dict
     q: np.ndarray
     v: np.ndarray
     end: tuple
-    row: dict = field(init=False, repr=False)
-
-    def __post_init__(self):
-        object.__setattr__(self, "row", {step: k for k, step in enumerate(self.steps.tolist())})
 
     def covers(self, target: int) -> bool:
         """Whether step ``target`` is stored or lies beyond the failure that ended the call."""
