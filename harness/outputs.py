@@ -31,6 +31,22 @@ def body_rotations(quaternions: np.ndarray) -> np.ndarray:
     return matrices.reshape(*np.shape(quaternions)[:-1], 3, 3)
 
 
+def rotation_between(first: np.ndarray, second: np.ndarray) -> np.ndarray:
+    """Angle (rad, in [0, π]) of the rotation from one orientation to the other, shape (...), from
+    scalar-first quaternions (..., 4) of either sign and any positive norm; NaN where either is
+    not finite or zero (as :func:`body_rotations` gives a NaN matrix there)."""
+    a = np.asarray(first, dtype=float).reshape(-1, 4)
+    b = np.asarray(second, dtype=float).reshape(-1, 4)
+    norms = np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1)
+    valid = np.isfinite(norms) & (norms > 0.0)
+    angles = np.full(a.shape[0], np.nan)
+    if np.any(valid):
+        relative = (Rotation.from_quat(a[valid], scalar_first=True).inv()
+                    * Rotation.from_quat(b[valid], scalar_first=True))
+        angles[valid] = relative.magnitude()
+    return angles.reshape(np.shape(first)[:-1])
+
+
 def wrap_angle(angle):
     """Angle(s) wrapped to (−π, π], rad."""
     return np.pi - np.mod(np.pi - angle, 2.0 * np.pi)

@@ -16,11 +16,15 @@ and withdraws ``ok`` at the first sample where
    coordinate (see :mod:`harness.branch`);
 5. the configuration left the reference's motion: it is farther than ``trajectory`` × the
    mechanism's size from the reference's configuration at the same time (the largest distance
-   over the bodies' centres of mass and joint points, :func:`harness.branch.markers`).  A run
-   can stay on its branch and still be a wrong answer: early or late by a large part of a cycle,
-   or with the wrong amplitude.  Check 4 names a branch switch as such; this one catches what it
-   lets through on purpose (it compares at the same driver value so as not to take a phase error
-   for a branch switch).
+   over the bodies' centres of mass and joint points, :func:`harness.branch.markers`), or a body
+   is turned by more than ``trajectory`` rad from the reference's orientation at the same time
+   (the distance's angular counterpart, as ``orientation`` is the gap's: a turn of 0.1 rad moves
+   a point at the mechanism's size from the axis by 0.1 of the size; without it a small body can
+   be far off in angle while its points stay close in metres).  A run can stay on its branch
+   and still be a wrong answer: early or late by a large part of a cycle, or with the wrong
+   amplitude.  Check 4 names a branch switch as such; this one catches what it lets through on
+   purpose (it compares at the same driver value so as not to take a phase error for a branch
+   switch).
 
 Breaches 2–5 give ``failed`` (the run finished, the answer is wrong), or ``diverged`` when the
 quantity exceeds its bound :data:`DIVERGED_FACTOR`-fold (at the default bounds: a joint gap the
@@ -59,6 +63,7 @@ from harness.branch import BranchCheck, branch_distance, markers
 from harness.energy import energy_balance, energy_scale
 from harness.metrics import violation_series
 from harness.model import GROUND, Mechanism, characteristic_length
+from harness.outputs import rotation_between
 from harness.sampling import TIME_MATCH, reference_indices
 from harness.trajectory import Trajectory
 
@@ -74,7 +79,8 @@ ENERGY_FRACTION = 5e-2
 #: :func:`characteristic_length`.
 BRANCH_FRACTION = 1e-1
 #: Largest distance from the reference's configuration at the same time, as a fraction of
-#: :func:`characteristic_length`: an error the size of a branch switch (:data:`BRANCH_FRACTION`).
+#: :func:`characteristic_length`: an error the size of a branch switch (:data:`BRANCH_FRACTION`);
+#: also the largest turn of a body from the reference's orientation at the same time, rad.
 TRAJECTORY_FRACTION = 1e-1
 #: A breach this many times past its bound is reported as ``diverged`` rather than ``failed``.
 DIVERGED_FACTOR = 1e3
@@ -95,7 +101,8 @@ class Bounds:
     branch : float
         Distance from the reference's branch / characteristic length.
     trajectory : float
-        Distance from the reference's configuration at the same time / characteristic length.
+        Distance from the reference's configuration at the same time / characteristic length,
+        and a body's turn from the reference's orientation at the same time, rad.
     """
 
     gap: float = GAP_FRACTION
@@ -235,15 +242,29 @@ def _trajectory_check(mech: Mechanism, trajectory: Trajectory, reference: Trajec
     if not covered.all():
         notes.append(f"motion not compared with the reference after t = "
                      f"{reference.times[-1]:.6g} s, where the reference ends")
-    run_markers, body_of = markers(mech, _samples(trajectory, covered))
-    apart = np.linalg.norm(run_markers - markers(mech, _samples(reference, index))[0], axis=-1)
-    worst = apart.argmax(axis=1)
-    distance = np.zeros(trajectory.n_samples)
-    distance[:worst.size] = apart[np.arange(worst.size), worst]
-    return Check(distance / limit, lambda k: f"left the reference's motion (body "
-                 f"{mech.bodies[body_of[worst[k]]].name} is {distance[k]:.3g} m from the "
-                 f"reference's configuration at the same time; bound {limit:.3g} m, "
-                 f"{bounds.trajectory:g} of the mechanism's size)")
+    run, same_time = _samples(trajectory, covered), _samples(reference, index)
+    run_markers, body_of = markers(mech, run)
+    apart = np.linalg.norm(run_markers - markers(mech, same_time)[0], axis=-1) / limit
+    turned = rotation_between(run.quaternion, same_time.quaternion) / bounds.trajectory
+    worst_marker, worst_body = apart.argmax(axis=1), turned.argmax(axis=1)
+    ratio = np.zeros(trajectory.n_samples)
+    ratio[:covered.sum()] = np.maximum(apart[np.arange(worst_marker.size), worst_marker],
+                                       turned[np.arange(worst_body.size), worst_body])
+
+    def describe(k):
+        found = []
+        if not apart[k, worst_marker[k]] <= 1.0:
+            found.append(f"body {mech.bodies[body_of[worst_marker[k]]].name} is "
+                         f"{apart[k, worst_marker[k]] * limit:.3g} m from the reference's "
+                         f"configuration at the same time; bound {limit:.3g} m, "
+                         f"{bounds.trajectory:g} of the mechanism's size")
+        if not turned[k, worst_body[k]] <= 1.0:
+            found.append(f"body {mech.bodies[worst_body[k]].name} is turned "
+                         f"{turned[k, worst_body[k]] * bounds.trajectory:.3g} rad from the "
+                         f"reference's orientation at the same time; bound "
+                         f"{bounds.trajectory:g} rad")
+        return f"left the reference's motion ({'; '.join(found)})"
+    return Check(ratio, describe)
 
 
 def _stick_checks(mech, trajectory, reference, bounds, notes) -> list[Check]:
