@@ -251,23 +251,21 @@ def _trajectory_check(mech: Mechanism, trajectory: Trajectory, reference: Trajec
     run_markers, body_of = markers(mech, run)
     apart = np.linalg.norm(run_markers - markers(mech, same_time)[0], axis=-1) / limit
     turned = rotation_between(run.quaternion, same_time.quaternion) / bounds.trajectory
-    worst_marker, worst_body = apart.argmax(axis=1), turned.argmax(axis=1)
     ratio = np.zeros(trajectory.n_samples)
-    ratio[:covered.sum()] = np.maximum(apart[np.arange(worst_marker.size), worst_marker],
-                                       turned[np.arange(worst_body.size), worst_body])
+    ratio[:covered.sum()] = np.maximum(apart.max(axis=1), turned.max(axis=1))
 
     def describe(k):
+        marker, body = apart[k].argmax(), turned[k].argmax()
         found = []
-        if not apart[k, worst_marker[k]] <= 1.0:
-            found.append(f"body {mech.bodies[body_of[worst_marker[k]]].name} is "
-                         f"{apart[k, worst_marker[k]] * limit:.3g} m from the reference's "
-                         f"configuration at the same time; bound {limit:.3g} m, "
-                         f"{bounds.trajectory:g} of the mechanism's size")
-        if not turned[k, worst_body[k]] <= 1.0:
-            found.append(f"body {mech.bodies[worst_body[k]].name} is turned "
-                         f"{turned[k, worst_body[k]] * bounds.trajectory:.3g} rad from the "
-                         f"reference's orientation at the same time; bound "
-                         f"{bounds.trajectory:g} rad")
+        if not apart[k, marker] <= 1.0:
+            found.append(f"body {mech.bodies[body_of[marker]].name} is "
+                         f"{apart[k, marker] * limit:.3g} m from the reference's configuration at "
+                         f"the same time; bound {limit:.3g} m, {bounds.trajectory:g} of the "
+                         f"mechanism's size")
+        if not turned[k, body] <= 1.0:
+            found.append(f"body {mech.bodies[body].name} is turned "
+                         f"{turned[k, body] * bounds.trajectory:.3g} rad from the reference's "
+                         f"orientation at the same time; bound {bounds.trajectory:g} rad")
         return f"left the reference's motion ({'; '.join(found)})"
     return Check(ratio, describe)
 
