@@ -264,7 +264,7 @@ def _trajectory_check(mech: Mechanism, trajectory: Trajectory, reference: Trajec
                          f"mechanism's size")
         if not turned[k, body] <= 1.0:
             found.append(f"body {mech.bodies[body].name} is turned "
-                         f"{turned[k, body] * bounds.trajectory:.3g} rad from the reference's "
+                         f"{turned[k, body] * bounds.trajectory:.4g} rad from the reference's "
                          f"orientation at the same time; bound {bounds.trajectory:g} rad")
         return f"left the reference's motion ({'; '.join(found)})"
     return Check(ratio, describe)
