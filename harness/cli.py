@@ -25,7 +25,8 @@ BOUNDS_HELP = ("the verdict's bounds as NAME=VALUE,...: gap (joint gap / mechani
                "%(gap)g), orientation (rad, %(orientation)g), energy (energy error / energy scale, "
                "%(energy)g), branch (distance from the reference's branch / mechanism size, "
                "%(branch)g), trajectory (distance from the reference at the same time / mechanism "
-               "size, and a body's turn from it in rad, %(trajectory)g); see harness/verdict.py" % vars(Bounds()))
+               "size, and a body's turn from it in rad, %(trajectory)g); see harness/verdict.py"
+               % vars(Bounds()))
 JSON_HELP = ('strict JSON on stdout; non-finite numbers as the strings "NaN", "Infinity", '
              '"-Infinity"')
 

@@ -40,5 +40,6 @@ def test_the_turn_ignores_the_quaternion_s_sign_and_norm_and_reads_small_angles(
 
 
 def test_an_undefined_orientation_gives_nan_not_an_exception():
-    turned = rotation_between(np.zeros((2, 4)) + [1.0, 0, 0, 0], np.array([[0.0] * 4, [np.nan] * 4]))
+    identity = np.tile([1.0, 0.0, 0.0, 0.0], (2, 1))
+    turned = rotation_between(identity, np.array([[0.0] * 4, [np.nan] * 4]))
     assert np.isnan(turned).all()

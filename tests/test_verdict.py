@@ -36,13 +36,20 @@ def reference(mech):
     return reference_trajectory(mech)
 
 
+def _late_by(reference: Trajectory, lag: int) -> Trajectory:
+    """The 10 ms grid of ``reference`` with the states ``lag`` reference samples (ms) earlier,
+    held at the start meanwhile (fresh arrays, to corrupt)."""
+    earlier = np.maximum(np.arange(0, reference.n_samples, STRIDE) - lag, 0)
+    return dataclasses.replace(
+        reference, times=reference.times[::STRIDE].copy(),
+        **{key: getattr(reference, key)[earlier].copy()
+           for key in ("position", "quaternion", "velocity", "angular_velocity")})
+
+
 @pytest.fixture()
 def run(reference):
     """A fresh copy of the reference on a 10 ms grid, to corrupt."""
-    return dataclasses.replace(
-        reference, **{key: getattr(reference, key)[::STRIDE].copy()
-                      for key in ("times", "position", "quaternion", "velocity",
-                                  "angular_velocity")})
+    return _late_by(reference, 0)
 
 
 def index_at(run: Trajectory, time: float) -> int:
@@ -133,17 +140,8 @@ def test_a_reference_that_changes_branch_is_not_used_for_the_branch_check(mech, 
                                "not a function of the driver O") for note in judged.notes)
 
 
-def _late(run: Trajectory, delay: int) -> Trajectory:
-    """``run`` lagging by ``delay`` samples (held at its start meanwhile)."""
-    for key in ("position", "quaternion", "velocity", "angular_velocity"):
-        array = getattr(run, key)
-        array[delay:] = array[:-delay].copy()
-        array[:delay] = array[0]
-    return run
-
-
-def test_a_late_run_leaves_the_reference_s_motion_not_its_branch(mech, reference, run):
-    late = _late(run, 25)  # 0.25 s late
+def test_a_late_run_leaves_the_reference_s_motion_not_its_branch(mech, reference):
+    late = _late_by(reference, 250)  # 0.25 s late
     # the crank angle lags by up to 2.2 rad, yet the configuration matches the reference's at
     # every crank angle (distance ≤ 1.4e-14 m, branch bound 0.574 m): a wrong answer, but not a
     # branch switch
@@ -156,16 +154,6 @@ def test_a_late_run_leaves_the_reference_s_motion_not_its_branch(mech, reference
     assert "assembly branch" not in judged.reason
     relaxed = judge(mech, late, reference, Bounds(trajectory=10.0))
     assert relaxed.status == "ok" and relaxed.notes == []
-
-
-def _late_by(reference: Trajectory, lag: int) -> Trajectory:
-    """The 10 ms grid of ``reference`` with the states ``lag`` reference samples (ms) earlier,
-    held at the start meanwhile."""
-    earlier = np.maximum(np.arange(0, reference.n_samples, STRIDE) - lag, 0)
-    return dataclasses.replace(
-        reference, times=reference.times[::STRIDE].copy(),
-        **{key: getattr(reference, key)[earlier].copy()
-           for key in ("position", "quaternion", "velocity", "angular_velocity")})
 
 
 def test_a_slightly_late_run_is_ok_and_its_error_is_a_matter_of_accuracy(mech, reference):
@@ -188,11 +176,11 @@ def test_a_turned_body_leaves_the_reference_s_motion_within_the_distance_bound(m
     assert judge(mech, late, reference, Bounds(trajectory=0.2)).status == "ok"
 
 
-def test_the_motion_is_judged_only_where_the_reference_reaches(mech, reference, run):
+def test_the_motion_is_judged_only_where_the_reference_reaches(mech, reference):
     short = dataclasses.replace(reference, **{
         key: getattr(reference, key)[:index_at(reference, 2.0) + 1]
         for key in ("times", "position", "quaternion", "velocity", "angular_velocity")})
-    judged = judge(mech, _late(run, 25), short)
+    judged = judge(mech, _late_by(reference, 250), short)
     assert judged.status == "failed" and judged.failure_time < 2.0
     assert "motion not compared with the reference after t = 2 s, where the reference ends" \
         in judged.notes
