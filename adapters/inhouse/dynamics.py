@@ -26,7 +26,7 @@ from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_
                                      pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec,
+from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, skippable,
                                      truncated_solve, weighted_gram)
 from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
@@ -208,7 +208,7 @@ def _gram_of_rows(jac, weighted, row_columns, nc):
                 continue
             for c in range(start, start + nc):
                 x = jac[i, c]
-                if x == 0.0:
+                if skippable(x):
                     continue
                 for j in range(i + 1):
                     gram[i, j] += x * weighted[j, c]

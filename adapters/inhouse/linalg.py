@@ -38,6 +38,15 @@ def truncated_solve(matrix, rhs, cut):
     return right[keep].T @ coefficients
 
 
+@njit(cache=True, inline="always")
+def skippable(x):
+    """True for an exact zero, whose products a sum may leave out: they add ±0 and change no
+    finite sum, so skipping them saves work and decides nothing.  (Traced code,
+    :mod:`adapters.inhouse.tracing`, never skips: there every entry that is not a constant zero
+    is kept.)"""
+    return x == 0.0
+
+
 #: A Cholesky solve is used only when the condition-number bound of :func:`certified_spd_solve`
 #: is this factor inside the truncation threshold, so that the bound's own round-off cannot
 #: let through a matrix the truncated SVD would have cut.
@@ -230,7 +239,7 @@ def weighted_gram(matrix, weights):
     gram = np.zeros((m, m))
     for i in range(m):
         for c in range(n):
-            if matrix[i, c] == 0.0:
+            if skippable(matrix[i, c]):
                 continue
             scaled = matrix[i, c] * weights[c]
             for j in range(i + 1):
