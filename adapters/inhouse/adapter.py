@@ -6,7 +6,9 @@ the aliases ``default`` and ``best``.  Parameters go to whichever part declares 
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
 Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
 one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition`` run compiled from sample
-to sample (``loop=compiled``, the default; ``loop=python`` steps the same arithmetic from Python).
+to sample, with functions generated for the mechanism (``loop=auto``, the default, or
+``generated``; :mod:`adapters.inhouse.compiled_stepper`), with the generic kernels
+(``loop=compiled``) or stepped from Python (``loop=python``); all compute the same numbers.
 """
 
 from __future__ import annotations
@@ -53,8 +55,8 @@ def _split(name: str) -> tuple[str, str]:
 
 def _spec(integrator: str, strategy: str) -> MethodSpec:
     """The method ``integrator+strategy`` with the parameters of both parts; methods with a
-    compiled path add ``loop`` (``compiled``, the default, or ``python``: the same arithmetic,
-    stepped from Python; :mod:`adapters.inhouse.compiled_stepper`)."""
+    compiled path add ``loop`` (:data:`~adapters.inhouse.compiled_stepper.LOOPS`: ``auto``, the
+    default, ``generated``, ``compiled`` or ``python``)."""
     formulation = FORMULATIONS[strategy]
     params = {**integrator_params(integrator), **formulation.defaults}
     if has_compiled_path(integrator, strategy):
@@ -115,7 +117,7 @@ class InhouseAdapter(Adapter):
         return model
 
     def _check_params(self, spec: MethodSpec, params: dict) -> None:
-        if params.get("loop", "compiled") not in LOOPS:
+        if params.get("loop", LOOPS[0]) not in LOOPS:
             raise ValueError(f"parameter 'loop' of {spec.name!r} must be one of "
                              f"{', '.join(LOOPS)}, got {params['loop']!r}")
         if spec.name == "ida":
@@ -123,10 +125,10 @@ class InhouseAdapter(Adapter):
             check_ida_params(params)
 
     def bare_loop(self, model: Mechanism, method: str, dt: float, n_steps: int) -> float:
-        """The compiled loop alone: ``n_steps`` steps in one call (methods with ``loop=compiled``;
-        the Python path has no loop apart from the adapter's)."""
+        """The compiled loop alone: ``n_steps`` steps in one call (methods on the compiled path;
+        the Python path, ``loop=python``, has no loop apart from the adapter's)."""
         spec, params = self.method_spec(method)
-        if params.get("loop") != "compiled":
+        if params.get("loop", "python") == "python":
             raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
                                   "the adapter's")
         stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
@@ -148,8 +150,9 @@ class InhouseAdapter(Adapter):
         own = {k: v for k, v in params.items() if k in formulation.defaults}
         rest = {k: v for k, v in params.items() if k not in formulation.defaults and k != "loop"}
         loop = params.get("loop", "python")
-        stepper = CompiledStepper if loop == "compiled" else InhouseStepper
-        return stepper(model, formulation, integrator, rest, own, grid)
+        if loop == "python":
+            return InhouseStepper(model, formulation, integrator, rest, own, grid)
+        return CompiledStepper(model, formulation, integrator, rest, own, grid, loop)
 
 
 class _IdaStepper(Stepper):

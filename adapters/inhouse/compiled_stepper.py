@@ -5,6 +5,10 @@ runs per step.
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
 rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method
 says ``loop=python``; every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
+With ``loop=auto`` (the default) or ``generated`` each stage's q̈, the projection's parts and ρ̂
+come from functions generated for the formulation (:mod:`adapters.inhouse.generated`: the same
+numbers, a step 3–4 times faster; :data:`LOOPS` says when ``auto`` compiles them), with
+``loop=compiled`` from the generic kernels.
 The formulation object is built as on the Python path (its rows, gains, projection cut, split and
 notes are the compiled loop's inputs), so both paths integrate the same equations with the same
 arithmetic.  Partitioning returns to Python only to choose a new split.
@@ -25,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import compiled
+from adapters.inhouse import compiled, generated
 from adapters.inhouse.driver import FormulationStepper
 from adapters.inhouse.fold import Passages
 from adapters.inhouse.partition import CoordinatePartitioning
@@ -41,8 +45,18 @@ COMPILED_FORMULATIONS = {NoStabilisation.name: compiled.PLAIN, Baumgarte.name: c
                          DirectCorrection.name: compiled.PROJECTED,
                          CoordinatePartitioning.name: compiled.PARTITIONED}
 
-#: The ``loop`` method parameter: which stepping path runs a method that has both.
-LOOPS = ("compiled", "python")
+#: The ``loop`` method parameter: which stepping path runs a method that has a compiled one
+#: (``generated``: the compiled loop with functions generated for the formulation, compiled on
+#: first use; ``auto``: the same, except that a run of fewer than :data:`AUTO_MIN_CALLS`
+#: right-hand sides compiles none and takes only those compiled before; ``compiled``: the
+#: compiled loop with the generic kernels; ``python``: the same arithmetic stepped from Python).
+LOOPS = ("auto", "generated", "compiled", "python")
+
+#: Below this many right-hand sides a run with ``loop=auto`` compiles no generated function: a
+#: check or a smoke test of a new mechanism (tens to hundreds of steps) would wait seconds for a
+#: compilation that saves it milliseconds.  Every run of the shipped campaigns is longer (the
+#: shortest, the four-bar's 4 s at 1e-2 s with rk4, takes 1,600).
+AUTO_MIN_CALLS = 1000
 
 
 def has_compiled_path(integrator_name: str, formulation_name: str) -> bool:
@@ -64,26 +78,32 @@ class CompiledStepper(FormulationStepper):
     integrator_params, formulation_params : dict
         Resolved parameters of each part (``divergence_limit`` is the integrator's).
     grid : RunGrid
+    loop : str
+        ``auto``, ``generated`` or ``compiled`` (:data:`LOOPS`).
     """
 
     def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
-                 integrator_params: dict, formulation_params: dict, grid: RunGrid):
+                 integrator_params: dict, formulation_params: dict, grid: RunGrid,
+                 loop: str = LOOPS[0]):
         super().__init__(mech, formulation_class, formulation_params, grid)
         formulation = self.formulation
         self._code = COMPILED_FORMULATIONS[formulation_class.name]
         tableau = integrator_class(integrator_name).tableau
         self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
+        self.passages = Passages.of(formulation, integrator_class(integrator_name))
         self._model = (np.asarray(formulation.gains, dtype=float),
                        np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
-                       formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays)
+                       formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
+                       generated.NOTHING if loop == "compiled" else self._generated_functions(
+                           compile_new=loop == "generated"
+                           or grid.steps(grid.t_end) * tableau.c.size >= AUTO_MIN_CALLS))
         params = formulation.params
         self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
                              float(formulation.cut)) if self._code == compiled.PROJECTED
                             else (0.0, 0, 0.0))
         self._limit = float(integrator_params["divergence_limit"])
-        self._counters = np.zeros(4, dtype=np.int64)
+        self._counters = np.zeros(5, dtype=np.int64)
         self._check_due = np.zeros(1, dtype=np.int64)
-        self.passages = Passages.of(formulation, integrator_class(integrator_name))
         self._partition = None
         self._restart(*self._start_state)
         self._samples: _Samples | None = None
@@ -92,6 +112,22 @@ class CompiledStepper(FormulationStepper):
             self._run(0)
         else:
             self._run_samples(np.zeros(0, dtype=np.int64))
+
+    def _generated_functions(self, compile_new: bool) -> tuple:
+        """The generated functions the loop calls for this formulation (:mod:`.generated`): the
+        right-hand side always, the projection's parts for ``direct``, ρ̂ for ``none`` and
+        ``baumgarte`` with placed passages on; with ``compile_new`` False only those compiled
+        before; a note for each that could not be had."""
+        wanted = [generated.ACCELERATION]
+        if self._code == compiled.PROJECTED:
+            wanted += [generated.RESIDUAL_SIZE, generated.POSITION_CORRECTION,
+                       generated.VELOCITY_CORRECTION]
+        elif self._code == compiled.PLAIN and self.passages.arrays[0][0] > 0.0:
+            wanted.append(generated.INDICATOR)
+        made, notes = generated.functions(self.formulation, *self._start_state, wanted,
+                                          compile_new)
+        self.notes.extend(notes)
+        return made
 
     # -- the integrated state ----------------------------------------------------------------
     def _restart(self, q_full: np.ndarray, v_full: np.ndarray) -> None:
@@ -214,6 +250,7 @@ class CompiledStepper(FormulationStepper):
                 + int(self._counters[compiled.FACTORIZATIONS]),
                 "newton_iterations": own["newton_iterations"]
                 + int(self._counters[compiled.NEWTON_ITERATIONS]),
+                "kernel_calls": int(self._counters[compiled.KERNEL_CALLS]),
                 "repartitions": getattr(self.formulation, "repartitions", 0),
                 "passages": int(self.passages.count[0])}
 

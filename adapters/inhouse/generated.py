@@ -1,0 +1,222 @@
+"""Generated kernels: what the compiled loop computes at every stage and step, traced for one
+formulation into straight-line code.
+
+The generic kernels (:func:`~adapters.inhouse.dynamics.index1_acceleration`, the projection's
+Φ, Φ_q and minimum-norm corrections, the conditioning indicator ρ̂) loop over tables of
+primitives, bodies and matrix entries.  :func:`compiled_function` runs one of them once on
+symbols (:mod:`adapters.inhouse.tracing`) with the formulation's rows, gains, projection cut and
+tables fixed, and compiles what it recorded as a numba ``cfunc`` of :data:`SIGNATURE`::
+
+    accepted = function(q, v, t, out)     # q, v (n,), t s; writes into out
+
+It returns 1 with ``out`` the kernel's result to the bit, or 0 (``out`` unspecified) where one of
+the kernel's branches on data goes the other way than at the traced state (a guard: a pivot, the
+certificate of a Cholesky solve); the compiled loop (:mod:`adapters.inhouse.compiled`) then calls
+the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION` …), with
+:data:`NEVER` (always 0: the kernel) where one cannot be made: a trace over
+:data:`MAX_OPERATIONS`, a kernel path through LAPACK (the banded solves of planar systems with
+30 rows or more, the SVD of a system without a certificate at the start) — each with a note.
+
+Measured (one call in a compiled loop, this machine): the right-hand side of the planar four-bar
+0.21 µs against the kernel's 1.9 µs (704 operations, 21 guards); of the spatial slider-crank
+1.1 µs against 5.1 µs (6,798 operations, 105 guards).  The cost is the first compilation, ~1 s
+and ~7 s for those two and as much again for the projection's parts, paid once per formulation
+and machine: the source goes to :func:`cache_directory` under a name made of its hash, where
+numba caches the compiled function next to it.
+
+The traced state is the formulation's start, its coordinates moved by ~1e-6 and its velocities
+by ~1 in a fixed pseudo-random direction, so that no entry is zero there by the start's symmetry
+alone; close enough to the start for the guards on pivots and certificates to hold along a run.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+from numba import cfunc, types
+from numba.core.errors import NumbaExperimentalFeatureWarning
+
+from adapters.inhouse import banded, bodykin, dynamics, kernels, linalg, tracing
+
+# The compiled loop takes the generated functions as first-class function values, a numba
+# feature still labelled experimental (a warning at every compilation that types one); the tests
+# cover its use here.
+warnings.filterwarnings("ignore", message="First-class function type feature is experimental",
+                        category=NumbaExperimentalFeatureWarning)
+
+#: ``accepted(q, v, t, out)`` of every generated function.
+SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64,
+                        types.float64[::1])
+
+#: Traces with more operations are not compiled (the kernel runs instead): numba compiles
+#: ~1,000 straight-line operations a second, so a mechanism of tens of bodies would wait minutes.
+MAX_OPERATIONS = 20_000
+
+
+@cfunc(SIGNATURE, cache=True)
+def _never(q, v, t, out):
+    """The kernel for every call."""
+    return 0
+
+
+NEVER = _never
+
+
+class NotGenerated(RuntimeError):
+    """No generated function for this formulation: the trace passed
+    :data:`MAX_OPERATIONS`, or the kernel took a branch that cannot be traced (a LAPACK call: the
+    truncated SVD of a redundant or singular system at the traced state)."""
+
+
+def cache_directory() -> Path:
+    """Where generated sources (and numba's cache of them) live: ``$MBH_GENERATED_DIR``, else
+    ``$XDG_CACHE_HOME/mbh/generated`` (``~/.cache/mbh/generated``)."""
+    explicit = os.environ.get("MBH_GENERATED_DIR")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "mbh" / "generated"
+
+
+#: The generated functions, by their index in :func:`functions`' tuple (all of
+#: :data:`SIGNATURE`; ``out`` as given):
+#:
+#: * ACCELERATION — q̈ (n,) of :func:`~adapters.inhouse.dynamics.index1_acceleration`;
+#: * RESIDUAL_SIZE — max |Φ| over the formulation's rows, out[0];
+#: * POSITION_CORRECTION — q − Φ_q⁺Φ (n,), one iteration of the position projection (002 eq. 127,
+#:   :func:`~adapters.inhouse.banded.min_norm_correction`);
+#: * VELOCITY_CORRECTION — q̇ − Φ_q⁺Φ_q q̇ (n,) and ρ̂ in out[n], the velocity projection (002
+#:   eq. 137) and the conditioning indicator of the placed passages
+#:   (:func:`~adapters.inhouse.banded.min_norm_correction_and_indicator`);
+#: * INDICATOR — ρ̂ alone, out[0] (:func:`~adapters.inhouse.banded.conditioning_indicator`).
+ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR = range(5)
+_NAMES = ("acceleration", "residual_size", "position_correction", "velocity_correction",
+          "indicator")
+
+
+def _outputs(which: int, formulation, q, v, t) -> list:
+    """What function ``which`` computes, from the kernels, on the symbols q, v, t."""
+    rows = np.ascontiguousarray(formulation.rows)
+    constraint_args = formulation.constraints.kernel_args
+    sparsity_arrays = formulation.constraints.sparsity.arrays
+    if which == ACCELERATION:
+        alpha, beta = (float(x) for x in formulation.gains)
+        return list(dynamics.index1_acceleration(q, v, t, alpha, beta, rows, constraint_args,
+                                                 formulation.dynamics.kernel_args,
+                                                 sparsity_arrays))
+    if which == RESIDUAL_SIZE:  # compiled._max_abs: the largest of 0 and every |Φ_i|
+        return [tracing.maximum([0.0, *(abs(x) for x in
+                                       kernels.phi(q, t, constraint_args)[rows])])]
+    jacobian = kernels.jacobian(q, t, constraint_args)[rows]
+    if which == POSITION_CORRECTION:
+        residual = kernels.phi(q, t, constraint_args)[rows]
+        return list(q - banded.min_norm_correction(jacobian, residual, formulation.cut,
+                                                   sparsity_arrays))
+    if which == VELOCITY_CORRECTION:
+        correction, indicator = banded.min_norm_correction_and_indicator(
+            jacobian, banded.pattern_matvec(jacobian, sparsity_arrays[0], v), formulation.cut,
+            sparsity_arrays)
+        return [*(v - correction), indicator]
+    return [banded.conditioning_indicator(jacobian, sparsity_arrays)]
+
+
+def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> str:
+    """The Python source of generated function ``which`` (:data:`ACCELERATION` …) of
+    ``formulation`` (its rows, gains α, β, projection cut, constraint and dynamics tables), traced
+    near the start (q0, v0) (see the module notes).
+
+    Raises
+    ------
+    NotGenerated
+        When the trace passes :data:`MAX_OPERATIONS` or meets a branch it cannot follow.
+    """
+    rng = np.random.default_rng(20261126)
+    q = q0 + 1e-6 * rng.standard_normal(q0.size)
+    v = v0 + rng.standard_normal(v0.size)
+    graph = tracing.Graph(limit=MAX_OPERATIONS)
+    name = _NAMES[which]
+    try:
+        with tracing.tracing([kernels, dynamics, linalg, bodykin, banded]):
+            out = _outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
+                           graph.scalar("t", 0.0))
+    except tracing.LimitReached:
+        raise NotGenerated(f"the trace takes more than {MAX_OPERATIONS} operations") from None
+    except Exception as error:  # noqa: BLE001 — an untraceable branch; the kernel runs instead
+        raise NotGenerated(f"the kernels' path at the start cannot be traced: "
+                           f"{type(error).__name__}: {error}") from None
+    return tracing.function_source(graph, name, ("q", "v", "t"), out)
+
+
+class NotCompiled(NotGenerated):
+    """The function was asked for only if already compiled (``compile_new=False``), and is not."""
+
+
+def compiled_function(which: int, formulation, q0: np.ndarray, v0: np.ndarray,
+                      compile_new: bool = True):
+    """Generated function ``which`` of ``formulation``, compiled (a ``cfunc`` of
+    :data:`SIGNATURE`), from numba's cache when this source was compiled before.
+
+    Raises
+    ------
+    NotGenerated
+        When the trace passes :data:`MAX_OPERATIONS` or meets a branch it cannot follow, or the
+        source does not compile (a fault of the generator, which the tests look for).
+    """
+    body = function_source(which, formulation, q0, v0)
+    source = ("# Generated by adapters/inhouse/generated.py for one formulation.  Do not edit;\n"
+              "# delete freely (it is made again when needed).\n"
+              "import numpy as np\nfrom numba import cfunc\n\n"
+              "from adapters.inhouse.generated import SIGNATURE\n\n\n"
+              "@cfunc(SIGNATURE, cache=True)\n" + body)
+    name = "mbh_" + hashlib.sha256(source.encode()).hexdigest()[:24]
+    module = sys.modules.get(name)
+    if module is None:
+        directory = cache_directory()
+        path = directory / f"{name}.py"
+        compiled_mark = directory / f"{name}.compiled"
+        if not compile_new and not compiled_mark.exists():
+            raise NotCompiled("not compiled yet")
+        directory.mkdir(parents=True, exist_ok=True)
+        if not path.exists():  # written whole, then renamed: a concurrent reader never sees half
+            partial = directory / f"{name}.{os.getpid()}.tmp"
+            partial.write_text(source, encoding="utf-8")
+            os.replace(partial, path)
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # numba's cache finds the module's globals by its name
+        try:
+            spec.loader.exec_module(module)  # compiles the cfunc, or loads it from the cache
+        except Exception as error:  # noqa: BLE001 — a generator fault must not end the run
+            del sys.modules[name]
+            raise NotGenerated(f"{path} does not compile: {type(error).__name__}: "
+                               f"{str(error)[:300]}") from None
+        compiled_mark.touch()  # numba's cache of it is written: later runs load it
+    return getattr(module, _NAMES[which])
+
+
+#: The tuple of :func:`functions` with nothing generated: the kernels for every call (the
+#: compiled loop with ``loop=compiled``).
+NOTHING = (NEVER,) * len(_NAMES)
+
+
+def functions(formulation, q0: np.ndarray, v0: np.ndarray, wanted,
+              compile_new: bool = True) -> tuple[tuple, list[str]]:
+    """The compiled loop's generated functions for ``formulation``: a tuple indexed by
+    :data:`ACCELERATION` …, the compiled function for each index in ``wanted`` that can be made
+    (with ``compile_new`` False: that was compiled before, by any run on this machine) and
+    :data:`NEVER` elsewhere, and one note per reason some were not, starting "not generated"."""
+    made, missing = [NEVER] * len(_NAMES), {}
+    for which in wanted:
+        try:
+            made[which] = compiled_function(which, formulation, q0, v0, compile_new)
+        except NotGenerated as error:
+            missing.setdefault(str(error), []).append(_NAMES[which].replace("_", " "))
+    notes = [f"not generated: {', '.join(names)} ({reason}); the generic kernels serve them"
+             for reason, names in missing.items()]
+    return tuple(made), notes

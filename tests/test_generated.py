@@ -1,0 +1,179 @@
+"""Generated right-hand sides (adapters/inhouse/generated.py, tracing.py): the traced
+straight-line q̈ against the generic kernel it was traced from.
+
+Bounds: the generated function makes the kernel's floating-point operations on the same operands
+in the same order (only exact identities folded), so it returns the kernel's numbers; measured on
+this machine (2026-11-26) the largest difference over every shipped scene, both gains and the
+states below is 0.0.  The bound, 1e-13 relative to the largest |q̈|, leaves room for a build that
+evaluates an elementary function (sqrt, sin, cos) differently in the two compiled functions, and
+is far below any method's error.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+from numba import njit
+
+from adapters import get_adapter
+from adapters.base import RunFailure, RunGrid
+from adapters.inhouse import banded, generated, kernels, tracing
+from adapters.inhouse.dynamics import index1_acceleration
+from harness import scenario
+from harness.sampling import sample_times
+from tests.test_compiled_path import LARGE_TRACES
+
+RELATIVE_BOUND = 1e-13
+
+EXAMPLE_KERNEL = '''
+import numpy as np
+
+def kernel(x):
+    root = np.sqrt(x[0])
+    return root * x[1] if root > 1.0 else x[1]
+'''
+
+
+def test_exact_identities_fold_and_repeated_operations_are_recorded_once():
+    graph = tracing.Graph()
+    x, y = graph.inputs("q", [2.0, 3.0])
+    assert x * 0.0 == 0.0 and 0.0 * y == 0.0  # plain zeros: no symbol, so no guard either
+    assert (x * 1.0) is x and (x + 0.0) is x and (x - 0.0) is x and (x / 1.0) is x
+    assert not graph.guards
+    first, second = x * y, x * y
+    assert first.index == second.index and first.value == 6.0
+    negated = 0.0 - x
+    assert negated.value == -2.0 and graph.nodes[negated.index][0] == "neg"
+    assert len(graph.nodes) == 4  # x, y, x·y, −x
+
+
+def test_a_guard_hands_the_call_back_when_the_branch_goes_the_other_way():
+    module = types.ModuleType("example_kernel")
+    exec(EXAMPLE_KERNEL, module.__dict__)
+    graph = tracing.Graph()
+    with tracing.tracing([module]):
+        traced = module.kernel(graph.inputs("q", [4.0, 3.0]))
+    assert [(compare, other, outcome) for _, compare, other, outcome in graph.guards] == \
+        [("gt", 1.0, True)]
+    namespace = {}
+    exec("import numpy as np\n" + tracing.function_source(graph, "f", ("q",), [traced]),
+         namespace)  # the source alone, run as plain Python
+    out = np.zeros(1)
+    assert namespace["f"](np.array([9.0, 2.0]), out) == 1 and out[0] == 6.0
+    assert namespace["f"](np.array([0.25, 2.0]), out) == 0  # √0.25 < 1: the other branch
+
+
+def test_a_trace_past_its_limit_stops():
+    graph = tracing.Graph(limit=3)
+    x, y = graph.inputs("q", [2.0, 3.0])
+    x * y
+    with pytest.raises(tracing.LimitReached):
+        x + y
+
+
+@njit
+def _call(function, q, v, t, out):
+    return function(q, v, t, out)
+
+
+def _states(name: str, method: str, count: int = 10):
+    """The formulation of ``method`` on scene ``name`` and (t, q, q̇) at the start and at ``count``
+    sample times of 0.2 s of its own run on the generic kernels (``loop=compiled``)."""
+    mech, adapter = scenario.load(name), get_adapter("inhouse")
+    dt = mech.sample_step / 10 if mech.sample_step < 1e-2 else 1e-3
+    t_end = 200 * dt
+    spec, params = adapter.method_spec(f"{method}:loop=compiled")
+    stepper = adapter._start(mech, spec, params,
+                             RunGrid(dt, t_end, sample_times(dt, t_end, t_end / count), True))
+    states = [(0.0, *stepper._start_state)]
+    for t in stepper.grid.sample_times[1:]:
+        try:
+            stepper._step_to(float(t))
+        except RunFailure:  # stiff_fourbar diverges at this step: its states up to there
+            break
+        states.append((float(t), stepper.q.copy(), stepper.v.copy()))
+    return stepper.formulation, stepper._start_state, states
+
+
+def _kernel_result(which: int, formulation, q, v, t) -> np.ndarray:
+    """What generated function ``which`` should write, from the compiled kernels themselves."""
+    rows = np.ascontiguousarray(formulation.rows)
+    constraint_args = formulation.constraints.kernel_args
+    sparsity_arrays = formulation.constraints.sparsity.arrays
+    if which == generated.ACCELERATION:
+        alpha, beta = formulation.gains
+        return index1_acceleration(q, v, t, alpha, beta, rows, constraint_args,
+                                   formulation.dynamics.kernel_args, sparsity_arrays)
+    residual = kernels.phi(q, t, constraint_args)[rows]
+    if which == generated.RESIDUAL_SIZE:
+        return np.array([np.abs(residual).max()])
+    jacobian = kernels.jacobian(q, t, constraint_args)[rows]
+    if which == generated.POSITION_CORRECTION:
+        return q - banded.min_norm_correction(jacobian, residual, formulation.cut,
+                                              sparsity_arrays)
+    if which == generated.VELOCITY_CORRECTION:
+        correction, indicator = banded.min_norm_correction_and_indicator(
+            jacobian, banded.pattern_matvec(jacobian, sparsity_arrays[0], v), formulation.cut,
+            sparsity_arrays)
+        return np.append(v - correction, indicator)
+    return np.array([banded.conditioning_indicator(jacobian, sparsity_arrays)])
+
+
+#: Each generated function with a formulation that uses it.
+FUNCTIONS = [(generated.ACCELERATION, "rk4+direct"), (generated.ACCELERATION, "rk4+baumgarte"),
+             (generated.RESIDUAL_SIZE, "rk4+direct"), (generated.POSITION_CORRECTION, "rk4+direct"),
+             (generated.VELOCITY_CORRECTION, "rk4+direct"), (generated.INDICATOR, "rk4+none")]
+
+
+@pytest.mark.parametrize("which, method", FUNCTIONS)
+@pytest.mark.parametrize("name", [pytest.param(name, marks=pytest.mark.slow)
+                                  if name in LARGE_TRACES else name
+                                  for name in scenario.scenario_names()])
+def test_each_generated_function_computes_what_its_kernels_compute(name, which, method):
+    """At the start and ten states along 0.2 s of the formulation's own run, every guard holds
+    (measured) and the result is the kernels'; Bricard's trace is too large."""
+    formulation, start, states = _states(name, method)
+    try:
+        function = generated.compiled_function(which, formulation, *start)
+    except generated.NotGenerated:
+        assert name == "bricard"
+        return
+    for t, q, v in states:
+        expected = _kernel_result(which, formulation, q, v, t)
+        out = np.empty(q.size + 1)
+        assert _call(function, q, v, t, out) == 1
+        scale = max(np.abs(expected).max(), np.finfo(float).tiny)
+        assert np.abs(out[:expected.size] - expected).max() <= RELATIVE_BOUND * scale
+
+
+def test_the_source_is_the_same_every_time():
+    """The source names its numba cache: a trace that varied would compile again each run."""
+    formulation, start, _ = _states("fourbar", "rk4+direct", count=1)
+    assert generated.function_source(generated.ACCELERATION, formulation, *start) == \
+        generated.function_source(generated.ACCELERATION, formulation, *start)
+
+
+def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypatch):
+    """``loop=auto`` (the default): 100 rk4 steps (400 right-hand sides, below AUTO_MIN_CALLS)
+    take the kernels until the functions exist; 300 steps compile them; then short runs load
+    them.  Gains no other test traces, so no other test compiles this right-hand side."""
+    monkeypatch.setenv("MBH_GENERATED_DIR", str(tmp_path))
+    mech, adapter = scenario.load("fourbar"), get_adapter("inhouse")
+    method = "rk4+baumgarte:alpha=7,beta=7"
+
+    def run(t_end):
+        return adapter.simulate(mech, method, 1e-3, t_end, sample_times(1e-3, t_end, 0.1))
+
+    first = run(0.1)
+    assert first.counters["kernel_calls"] == first.counters["rhs_evals"] == 400
+    # (ρ̂'s function does not depend on the gains: another test may have compiled it already.)
+    assert any(note.startswith("not generated: acceleration") and "(not compiled yet)" in note
+               for note in first.notes), first.notes
+    assert not list(tmp_path.glob("*.compiled"))
+    long = run(0.3)
+    assert long.counters["kernel_calls"] == 0 and list(tmp_path.glob("*.compiled"))
+    again = run(0.1)
+    assert again.counters["kernel_calls"] == 0
+    np.testing.assert_array_equal(again.position, first.position)
