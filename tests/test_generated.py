@@ -1,10 +1,10 @@
-"""Generated right-hand sides (adapters/inhouse/generated.py, tracing.py): the traced
-straight-line q̈ against the generic kernel it was traced from.
+"""Generated kernels (adapters/inhouse/generated.py, tracing.py): the traced straight-line
+functions against the generic kernels they were traced from, and when ``loop=auto`` makes them.
 
-Bounds: the generated function makes the kernel's floating-point operations on the same operands
+Bounds: a generated function makes its kernel's floating-point operations on the same operands
 in the same order (only exact identities folded), so it returns the kernel's numbers; measured on
-this machine (2026-11-26) the largest difference over every shipped scene, both gains and the
-states below is 0.0.  The bound, 1e-13 relative to the largest |q̈|, leaves room for a build that
+this machine (2026-11-26) the largest difference over every shipped scene, all five functions and
+the states below is 0.0.  The bound, 1e-13 relative to the largest |q̈|, leaves room for a build that
 evaluates an elementary function (sqrt, sin, cos) differently in the two compiled functions, and
 is far below any method's error.
 """

@@ -69,9 +69,9 @@ NEVER = _never
 
 
 class NotGenerated(RuntimeError):
-    """No generated function for this formulation: the trace passed
-    :data:`MAX_OPERATIONS`, or the kernel took a branch that cannot be traced (a LAPACK call: the
-    truncated SVD of a redundant or singular system at the traced state)."""
+    """No generated function for this formulation: the trace passed :data:`MAX_OPERATIONS`, the
+    kernel took a path that cannot be traced (LAPACK: the banded solves, the truncated SVD of a
+    system without a certificate at the traced state), or the source did not compile."""
 
 
 def cache_directory() -> Path:
