@@ -7,14 +7,15 @@ of their time goes to that bookkeeping (indices, branches on the kind of a row, 
 products with zeros).  Run on symbols instead of numbers (:class:`Symbol`), with the tables as
 plain constants, the same Python source leaves only the arithmetic of one mechanism: a graph of
 operations on the inputs q, q̇ and t, with products by constant zeros and ones folded away and
-repeated subexpressions computed once.  :func:`trace` records it; :func:`function_source` writes
-it out as Python source for numba.
+repeated subexpressions computed once.  A :class:`Graph` records it while the kernels run on its
+symbols within :func:`tracing`; :func:`function_source` writes it out as Python source for numba.
 
 *Same numbers.*  Every recorded operation is the one the kernel makes, on the same operands in
 the same order, so the generated function returns the kernel's result to the bit wherever the
-kernel's own arithmetic is finite.  Only exact identities are folded (x·0 = 0, x·1 = x, x ± 0 =
-x, 0 − x = −x, x/1 = x, operations on two constants); a NaN or an infinity reaching a folded
-product would differ, and the caller checks its result for those anyway.
+kernel's own arithmetic is finite, up to the sign of a zero.  Only exact identities are folded
+(x·0 = 0, x·1 = x, x ± 0 = x, 0 − x = −x, x/1 = x, operations on two constants); they can turn a
+−0 into +0 or back, which no later sum or product sees, and a NaN or an infinity reaching a
+folded product would differ, which the caller's divergence check catches anyway.
 
 *Guards.*  A kernel's branches on data (a Cholesky pivot that must be positive, a certificate
 bound) are taken during the trace as the traced values take them, at a generic state chosen by
@@ -57,8 +58,9 @@ class LimitReached(RuntimeError):
 
 
 class Graph:
-    """The operations recorded by one :func:`trace`: nodes in the order they were made (each
-    node's operands are earlier nodes or constants) and the guards on them.
+    """The operations recorded by one trace (kernels run on its symbols within
+    :func:`tracing`): nodes in the order they were made (each node's operands are earlier nodes
+    or constants) and the guards on them.
 
     Attributes
     ----------
@@ -100,7 +102,6 @@ class Graph:
         return np.array([self.node("input", (name, i), float(x)) for i, x in enumerate(values)]
                         + [None], dtype=object)[:-1]
 
-
     def scalar(self, name: str, value: float) -> "Symbol":
         """A symbol for the scalar input ``name``, valued ``value`` during the trace."""
         return self.node("input", (name, None), float(value))
@@ -109,8 +110,6 @@ class Graph:
 def _operand_key(x):
     if isinstance(x, Symbol):
         return ("n", x.index)
-    if isinstance(x, str):
-        return ("s", x)
     return ("c", float(x).hex())  # keeps −0.0 apart from 0.0
 
 
