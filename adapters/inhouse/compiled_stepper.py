@@ -91,12 +91,13 @@ class CompiledStepper(FormulationStepper):
         tableau = integrator_class(integrator_name).tableau
         self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
         self.passages = Passages.of(formulation, integrator_class(integrator_name))
+        calls = grid.steps(grid.t_end) * tableau.c.size
+        functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
+            compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
         self._model = (np.asarray(formulation.gains, dtype=float),
                        np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
                        formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
-                       generated.NOTHING if loop == "compiled" else self._generated_functions(
-                           compile_new=loop == "generated"
-                           or grid.steps(grid.t_end) * tableau.c.size >= AUTO_MIN_CALLS))
+                       functions)
         params = formulation.params
         self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
                              float(formulation.cut)) if self._code == compiled.PROJECTED
