@@ -19,8 +19,7 @@ from numba import njit
 
 from adapters import get_adapter
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import banded, generated, kernels, tracing
-from adapters.inhouse.dynamics import index1_acceleration
+from adapters.inhouse import generated, tracing
 from harness import scenario
 from harness.sampling import sample_times
 from tests.test_compiled_path import LARGE_TRACES
@@ -97,30 +96,6 @@ def _states(name: str, method: str, count: int = 10):
     return stepper.formulation, stepper._start_state, states
 
 
-def _kernel_result(which: int, formulation, q, v, t) -> np.ndarray:
-    """What generated function ``which`` should write, from the compiled kernels themselves."""
-    rows = np.ascontiguousarray(formulation.rows)
-    constraint_args = formulation.constraints.kernel_args
-    sparsity_arrays = formulation.constraints.sparsity.arrays
-    if which == generated.ACCELERATION:
-        alpha, beta = formulation.gains
-        return index1_acceleration(q, v, t, alpha, beta, rows, constraint_args,
-                                   formulation.dynamics.kernel_args, sparsity_arrays)
-    residual = kernels.phi(q, t, constraint_args)[rows]
-    if which == generated.RESIDUAL_SIZE:
-        return np.array([np.abs(residual).max()])
-    jacobian = kernels.jacobian(q, t, constraint_args)[rows]
-    if which == generated.POSITION_CORRECTION:
-        return q - banded.min_norm_correction(jacobian, residual, formulation.cut,
-                                              sparsity_arrays)
-    if which == generated.VELOCITY_CORRECTION:
-        correction, indicator = banded.min_norm_correction_and_indicator(
-            jacobian, banded.pattern_matvec(jacobian, sparsity_arrays[0], v), formulation.cut,
-            sparsity_arrays)
-        return np.append(v - correction, indicator)
-    return np.array([banded.conditioning_indicator(jacobian, sparsity_arrays)])
-
-
 #: Each generated function with a formulation that uses it.
 FUNCTIONS = [(generated.ACCELERATION, "rk4+direct"), (generated.ACCELERATION, "rk4+baumgarte"),
              (generated.RESIDUAL_SIZE, "rk4+direct"), (generated.POSITION_CORRECTION, "rk4+direct"),
@@ -141,7 +116,7 @@ def test_each_generated_function_computes_what_its_kernels_compute(name, which, 
         assert name == "bricard"
         return
     for t, q, v in states:
-        expected = _kernel_result(which, formulation, q, v, t)
+        expected = np.asarray(generated.kernel_outputs(which, formulation, q, v, t))
         out = np.empty(q.size + 1)
         assert _call(function, q, v, t, out) == 1
         scale = max(np.abs(expected).max(), np.finfo(float).tiny)

@@ -100,8 +100,9 @@ _NAMES = ("acceleration", "residual_size", "position_correction", "velocity_corr
           "indicator")
 
 
-def _outputs(which: int, formulation, q, v, t) -> list:
-    """What function ``which`` computes, from the kernels, on the symbols q, v, t."""
+def kernel_outputs(which: int, formulation, q, v, t) -> list:
+    """What function ``which`` computes, by the kernels: on symbols (q, v object arrays) its
+    trace, on numbers the result the generated function must reproduce."""
     rows = np.ascontiguousarray(formulation.rows)
     constraint_args = formulation.constraints.kernel_args
     sparsity_arrays = formulation.constraints.sparsity.arrays
@@ -143,7 +144,7 @@ def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> 
     name = _NAMES[which]
     try:
         with tracing.tracing([kernels, dynamics, linalg, bodykin, banded]):
-            out = _outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
+            out = kernel_outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
                            graph.scalar("t", 0.0))
     except tracing.LimitReached:
         raise NotGenerated(f"the trace takes more than {MAX_OPERATIONS} operations") from None
