@@ -25,7 +25,7 @@ from harness import scenario
 from harness.assembly import AssemblyError
 from harness.generate import mechanisms
 from harness.sampling import sample_times
-from tests.test_compiled_path import LARGE_TRACES
+from tests.test_compiled_path import LARGE_TRACES, PATH_BOUND
 
 RELATIVE_BOUND = 1e-13
 
@@ -154,7 +154,9 @@ def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypa
     assert long.counters["kernel_calls"] == 0 and list(tmp_path.glob("*.compiled"))
     again = run(0.1)
     assert again.counters["kernel_calls"] == 0
-    np.testing.assert_array_equal(again.position, first.position)
+    # Two paths to the same numbers (measured equal to the bit): bounded as tests/
+    # test_compiled_path.py bounds its paths, not by one machine's bits.
+    assert np.abs(again.position - first.position).max() <= PATH_BOUND
 
 
 @settings(max_examples=5, derandomize=True, deadline=None, database=None,
