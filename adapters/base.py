@@ -1,7 +1,7 @@
 """The adapter contract every engine implements, the in-house formulation included.
 
 ``build(mechanism)`` → engine model; ``simulate(model, method, dt, t_end, sample_times)`` →
-:class:`~harness.trajectory.Trajectory`; ``methods()`` lists the engine's methods with their
+:class:`~harness.model.trajectory.Trajectory`; ``methods()`` lists the engine's methods with their
 parameters; ``version()`` names the engine version.  Method names are user-facing strings
 ``NAME[:key=value,...]`` parsed by :func:`parse_method`.
 
@@ -11,7 +11,7 @@ One run loop
 the times with one rule (:func:`check_run_times`), asks the adapter for an engine-specific
 :class:`Stepper` (``Adapter._start``), steps it through every sample time and on to ``t_end``,
 checks every state it reads (:func:`divergence_reason`) and turns every way a run can end into a
-status (the classification is in :mod:`harness.trajectory`):
+status (the classification is in :mod:`harness.model.trajectory`):
 
 * ``ok``: every state read was finite and within :data:`DIVERGENCE_LIMIT`;
 * ``diverged``: a state read was non-finite or beyond the limit, or the engine's own divergence
@@ -37,8 +37,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from harness.model import Mechanism
-from harness.trajectory import BodyStates, Trajectory
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates, Trajectory
 
 #: A body whose position (m), velocity (m/s) or angular velocity (rad/s) exceeds this in norm has
 #: diverged (the same limit as the integrators' default ``divergence_limit``).

@@ -27,7 +27,7 @@ from adapters.inhouse import kernels
 from adapters.inhouse.compiled import _project
 from adapters.inhouse.dynamics import forces_kernel, index1_acceleration
 from adapters.inhouse.generated import ACCELERATION, NOTHING
-from harness import scenario
+from harness.model import scenario
 
 CASES = [("fourbar", "rk4+baumgarte"), ("fourbar", "rk4+direct"),
          ("slider_crank", "rk4+baumgarte"), ("slider_crank", "rk4+direct")]

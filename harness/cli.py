@@ -5,9 +5,9 @@ mechanism that cannot be assembled) prints one clear message per problem on stde
 status 2; it never shows a traceback.
 
 ``--json`` output is strict JSON (RFC 8259), whatever the numbers: a non-finite value is written as
-one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (:mod:`harness.jsonout`), and what
+one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (:mod:`harness.common.jsonout`), and what
 an engine library prints while a case runs is captured at the file-descriptor level and kept in
-the case's ``notes``, never on stdout (:mod:`harness.capture`).
+the case's ``notes``, never on stdout (:mod:`harness.common.capture`).
 """
 
 from __future__ import annotations
@@ -15,9 +15,11 @@ from __future__ import annotations
 import argparse
 import sys
 
-from harness import jsonout, scenario
-from harness.scenario import ScenarioError
-from harness.verdict import Bounds
+from harness.common import jsonout
+
+from harness.model import scenario
+from harness.model.scenario import ScenarioError
+from harness.measure.verdict import Bounds
 
 #: Most steps ``mbh simulate`` will attempt (a run longer than this is an input error).
 MAX_STEPS = 1e8
@@ -25,7 +27,7 @@ BOUNDS_HELP = ("the verdict's bounds as NAME=VALUE,...: gap (joint gap / mechani
                "%(gap)g), orientation (rad, %(orientation)g), energy (energy error / energy scale, "
                "%(energy)g), branch (distance from the reference's branch / mechanism size, "
                "%(branch)g), trajectory (distance from the reference at the same time / mechanism "
-               "size, and a body's turn from it in rad, %(trajectory)g); see harness/verdict.py"
+               "size, and a body's turn from it in rad, %(trajectory)g); see harness/measure/verdict.py"
                % vars(Bounds()))
 JSON_HELP = ('strict JSON on stdout; non-finite numbers as the strings "NaN", "Infinity", '
              '"-Infinity"')
@@ -74,18 +76,18 @@ def _names(args) -> list[str]:
 
 
 def cmd_check(args) -> int:
-    """Kinematic analysis by the harness's neutral kinematics (:mod:`harness.assembly`,
-    :mod:`harness.rank`): assembly residuals, rank, mobility, redundant equations, singularity.
+    """Kinematic analysis by the harness's neutral kinematics (:mod:`harness.neutral.assembly`,
+    :mod:`harness.neutral.mobility`): assembly residuals, rank, mobility, redundant equations, singularity.
 
     ``n_coordinates`` counts twist coordinates (6 per spatial body, 3 per planar body) and
     ``n_equations`` the joint rows (no driver, no normalisation rows);
     ``redundant_equation_labels`` names the rows the rank-revealing QR leaves over and
     ``dependent_equation_labels`` every row taking part in a dependency (any of which could be
     the one dropped: all 30 on Bricard's mechanism).  A start at a singular
-    configuration (condition number above :data:`harness.rank.CONDITION_LIMIT`, or rank lost) is
+    configuration (condition number above :data:`harness.neutral.mobility.CONDITION_LIMIT`, or rank lost) is
     refused: its entry has the ``error`` and, with the rank analysis there, a ``warning``.
     """
-    from harness.assembly import AssemblyError, assemble
+    from harness.neutral.assembly import AssemblyError, assemble
 
     mechanisms = [_load(name) for name in _names(args)]  # a bad file: exit 2 before any output
     results, failed = [], False
@@ -144,8 +146,8 @@ def _bounds(text: str | None) -> Bounds:
 
 
 def cmd_simulate(args) -> int:
-    from harness.case import run_case
-    from harness.reference import ReferenceError, reference_trajectory
+    from harness.run.case import run_case
+    from harness.references.build import ReferenceBuildError, reference_trajectory
 
     mech = _load(args.name)
     adapter = _adapter(args.adapter)
@@ -166,7 +168,7 @@ def cmd_simulate(args) -> int:
     if not args.no_reference:
         try:
             reference = reference_trajectory(mech)
-        except ReferenceError as error:
+        except ReferenceBuildError as error:
             print(f"mbh: no reference: {error}", file=sys.stderr)
     try:
         case = run_case(adapter, mech, args.method, args.dt, t_end, reference, bounds)
@@ -200,7 +202,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_seed_table(args) -> int:
-    from harness.seedtable import format_rows, seed_rows
+    from harness.jobs.seedtable import format_rows, seed_rows
 
     rows = seed_rows(repeats=args.repeats, bounds=_bounds(args.bounds))
     if args.json:
@@ -217,7 +219,7 @@ def _results_root(args):
 
 
 def _open_run(run_id: str, root):
-    from harness.store import RunStore
+    from harness.store.runs import RunStore
 
     try:
         return RunStore.open(run_id, root)
@@ -243,9 +245,9 @@ def _status_counts(frame) -> str:
 
 
 def cmd_run(args) -> int:
-    """Run a campaign into the result store (see :mod:`harness.runner`)."""
-    from harness.campaign import CampaignError, load_campaign
-    from harness.runner import CampaignInterrupted, RunnerError, run_campaign
+    """Run a campaign into the result store (see :mod:`harness.run.campaign`)."""
+    from harness.run.spec import CampaignError, load_campaign
+    from harness.run.campaign import CampaignInterrupted, RunnerError, run_campaign
 
     try:
         campaign = load_campaign(args.campaign)
@@ -281,8 +283,8 @@ def _number(value, digits: int = 3) -> str:
 
 
 def cmd_bench(args) -> int:
-    """The speed figures of :mod:`harness.bench`, measured in this run, printed as tables."""
-    from harness import bench
+    """The speed figures of :mod:`harness.jobs.bench`, measured in this run, printed as tables."""
+    from harness.jobs import bench
 
     parts = args.parts.split(",")
     unknown = sorted(set(parts) - set(BENCH_PARTS))
@@ -320,9 +322,9 @@ def cmd_bench(args) -> int:
 
 
 def _bench_front(args) -> None:
-    from harness.campaign import load_campaign
+    from harness.run.spec import load_campaign
     from harness.report.summary import front_ratio_table
-    from harness.runner import run_campaign
+    from harness.run.campaign import run_campaign
 
     store = run_campaign(load_campaign("bench"), workers=args.workers, root=_results_root(args),
                          quiet=True)
@@ -337,7 +339,7 @@ def _bench_front(args) -> None:
 
 
 def cmd_runs(args) -> int:
-    from harness.store import list_runs
+    from harness.store.runs import list_runs
 
     try:
         manifests = list_runs(_results_root(args))
@@ -381,7 +383,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from harness.run_compare import compare_runs
+    from harness.store.compare import compare_runs
 
     root = _results_root(args)
     a, b = _open_run(args.run_a, root), _open_run(args.run_b, root)
@@ -416,10 +418,10 @@ def cmd_report(args) -> int:
 
 def cmd_nightly(args) -> int:
     """Run a campaign, compare it with its previous run, report, and gate on regressions (see
-    :mod:`harness.nightly`); prints the Markdown summary; exit 1 on a regression."""
-    from harness.campaign import CampaignError
-    from harness.nightly import nightly
-    from harness.runner import CampaignInterrupted, RunnerError
+    :mod:`harness.jobs.nightly`); prints the Markdown summary; exit 1 on a regression."""
+    from harness.run.spec import CampaignError
+    from harness.jobs.nightly import nightly
+    from harness.run.campaign import CampaignInterrupted, RunnerError
 
     try:
         outcome = nightly(args.campaign, root=_results_root(args), workers=args.workers,
@@ -533,7 +535,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_report)
 
-    from harness.nightly import DEFAULT_CAMPAIGN, ERROR_FACTOR, TIME_FACTOR
+    from harness.jobs.nightly import DEFAULT_CAMPAIGN, ERROR_FACTOR, TIME_FACTOR
 
     p = sub.add_parser("nightly", help="run a campaign, compare it with its previous run, build "
                        "its report; exit 1 on a regression")

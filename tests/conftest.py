@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from harness import scenario
+from harness.model import scenario
 
 GRAVITY = 9.81  # m/s², double_fourbar's gravity
 

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 
 from adapters import get_adapter
-from harness import scenario
-from harness.initial import initial_state
-from harness.neutral_dynamics import accelerations
-from harness.outputs import output_series
-from harness.rank import rank_analysis
-from harness.reference import reference_grid, reference_trajectory
+from harness.model import scenario
+from harness.neutral.start import initial_state
+from harness.neutral.dynamics import accelerations
+from harness.model.outputs import output_series
+from harness.neutral.mobility import rank_analysis
+from harness.references.build import reference_grid, reference_trajectory
 
 PUBLISHED = Path(scenario.__file__).resolve().parent / "data" / "andrews_testset.toml"
 

@@ -1,4 +1,4 @@
-"""The neutral assembly and rank analysis (harness.assembly, harness.rank) and `mbh check`."""
+"""The neutral assembly and rank analysis (harness.neutral.assembly, harness.neutral.mobility) and `mbh check`."""
 
 from __future__ import annotations
 
@@ -12,13 +12,14 @@ from conftest import variant_text
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.kinematics import assemble as inhouse_assemble
 from adapters.inhouse.states import body_states
-from harness import cli, scenario
-from harness.assembly import AssemblyError, SingularStartError, assemble
-from harness.initial import initial_state
-from harness.joint_equations import JointEquations
-from harness.model import PrescribedJointRate, PrescribedPointVelocity
-from harness.outputs import body_rotations, joint_angle
-from harness.rank import CONDITION_LIMIT
+from harness import cli
+from harness.model import scenario
+from harness.neutral.assembly import AssemblyError, SingularStartError, assemble
+from harness.neutral.start import initial_state
+from harness.neutral.equations import JointEquations
+from harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
+from harness.model.outputs import body_rotations, joint_angle
+from harness.neutral.mobility import CONDITION_LIMIT
 
 SHIPPED = scenario.scenario_names()
 
@@ -65,7 +66,7 @@ def test_the_start_satisfies_the_joints_and_the_driver(name):
                                                s.angular_velocity)).max() <= 1e-12
     driver = mech.joint(mech.initial.driver)
     angle = joint_angle(mech, driver, s.position, body_rotations(s.quaternion))
-    assert angle == pytest.approx(value, abs=1e-12)  # harness.outputs' own angle; measured 3.9e-16
+    assert angle == pytest.approx(value, abs=1e-12)  # harness.model.outputs' own angle; measured 3.9e-16
     assert assembly.condition < CONDITION_LIMIT and assembly.report.mobility == 1
 
 

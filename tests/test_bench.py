@@ -1,4 +1,4 @@
-"""`mbh bench`'s reading of measurements (harness/bench.py, the front table of the report): the
+"""`mbh bench`'s reading of measurements (harness/jobs/bench.py, the front table of the report): the
 arithmetic on given rows, and the parts that run cheaply.  No wall time is asserted."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import math
 import pandas as pd
 import pytest
 
-from harness import bench
+from harness.jobs import bench
 from harness.cli import main
 from harness.report.summary import front_ratio_table
 

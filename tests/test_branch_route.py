@@ -1,4 +1,4 @@
-"""The reference routes along a declared branch (``harness/branch_route.py``) and the scenario
+"""The reference routes along a declared branch (``harness/references/routes.py``) and the scenario
 table that declares it, on the N-four-bar ``double_fourbar``.
 
 The outside check is the one-degree-of-freedom model of ``tests/test_double_fourbar.py``
@@ -14,14 +14,14 @@ import pytest
 from conftest import reduced_tip
 from scipy.spatial.transform import Rotation
 
-from harness import scenario
-from harness.assembly import assemble
-from harness.branch_route import BranchEquations, BranchRouteError, full_route, reduced_route
-from harness.joint_equations import JointEquations
-from harness.outputs import output_series
-from harness.reference import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, route_difference, \
+from harness.model import scenario
+from harness.neutral.assembly import assemble
+from harness.references.routes import BranchEquations, BranchRouteError, full_route, reduced_route
+from harness.neutral.equations import JointEquations
+from harness.model.outputs import output_series
+from harness.references.build import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, route_difference, \
     reference_trajectory
-from harness.scenario import ScenarioError
+from harness.model.scenario import ScenarioError
 
 
 @pytest.fixture(scope="module")

@@ -14,15 +14,16 @@ import numpy as np
 import pytest
 
 from adapters import get_adapter
-from harness import cli, scenario
-from harness.assembly import assemble
-from harness.case import simulate_case
-from harness.energy import mechanical_energy, state_arrays
-from harness.joint_equations import JointEquations
-from harness.outputs import output_series
-from harness.rank import grubler_mobility
-from harness.reference import reference_trajectory
-from harness.sampling import reference_indices
+from harness import cli
+from harness.model import scenario
+from harness.neutral.assembly import assemble
+from harness.run.case import simulate_case
+from harness.measure.energy import mechanical_energy, state_arrays
+from harness.neutral.equations import JointEquations
+from harness.model.outputs import output_series
+from harness.neutral.mobility import grubler_mobility
+from harness.references.build import reference_trajectory
+from harness.model.timegrid import reference_indices
 
 JOINTS = "ABCDEF"
 ROW_NAMES = ("gap x", "gap y", "gap z", "tilt about normal", "tilt about binormal")

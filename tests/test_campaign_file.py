@@ -8,9 +8,10 @@ import math
 import pytest
 
 from adapters import adapter_names
-from harness import campaign, scenario
-from harness.campaign import CampaignError, CaseSpec, load_campaign, main_output
-from harness.verdict import Bounds
+from harness.run import spec as campaign
+from harness.model import scenario
+from harness.run.spec import CampaignError, CaseSpec, load_campaign, main_output
+from harness.measure.verdict import Bounds
 
 #: A file with one mistake per line that matters; each (field, words of the message) must be named.
 BAD = """

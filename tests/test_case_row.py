@@ -9,12 +9,13 @@ import math
 import pytest
 
 from adapters import get_adapter
-from harness import case_row, scenario
-from harness.campaign import CaseSpec
-from harness.case_row import calibration_spec, error_row, run_spec
-from harness.reference import ReferenceError
-from harness.sampling import steps_per_sample
-from harness.verdict import DEFAULT_BOUNDS
+from harness.run import row as case_row
+from harness.model import scenario
+from harness.run.spec import CaseSpec
+from harness.run.row import calibration_spec, error_row, run_spec
+from harness.references.build import ReferenceBuildError
+from harness.model.timegrid import steps_per_sample
+from harness.measure.verdict import DEFAULT_BOUNDS
 
 #: Columns every row carries (the interface of issue 10), besides error_/final_<output>.
 REQUIRED = {
@@ -66,7 +67,7 @@ def test_a_refused_reference_runs_without_one(monkeypatch):
     # The refusal is simulated: the shipped double_fourbar's real refusal depends on the state of
     # the reference cache, and a stale record would start a build of several minutes.
     def refuse(mech):
-        raise ReferenceError(f"{mech.name}: routes disagree")
+        raise ReferenceBuildError(f"{mech.name}: routes disagree")
 
     monkeypatch.setattr(case_row, "reference_trajectory", refuse)
     row = run_spec(CaseSpec("fourbar", "inhouse", "best", 1e-2, 0.1), DEFAULT_BOUNDS, 1e-3).row

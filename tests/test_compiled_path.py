@@ -23,8 +23,8 @@ from adapters import get_adapter
 from adapters.base import RunGrid
 from adapters.inhouse import compiled
 from adapters.inhouse.linalg import certified_spd_solve, min_norm_solve, truncated_solve
-from harness import scenario
-from harness.sampling import sample_times
+from harness.model import scenario
+from harness.model.timegrid import sample_times
 
 PATH_BOUND = 1e-10  # m and m/s (rad, rad/s on angles' velocities), see the module docstring
 METHODS = ("rk4+direct:proj_tol=1e-15", "rkn4+baumgarte", "heun+none", "rk4+partition",

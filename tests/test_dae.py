@@ -22,7 +22,7 @@ from adapters.inhouse import kernels
 from adapters.inhouse.dae import DaeModel, IdaIntegration, IdaResult, ida_params, simulate_ida
 from adapters.inhouse.dynamics import Dynamics, mass_and_forces_kernel, solve_augmented
 from adapters.inhouse.kinematics import assemble
-from harness import scenario
+from harness.model import scenario
 
 T_END = 4.0
 SAMPLES = np.linspace(0.0, T_END, 401)

@@ -25,9 +25,9 @@ import pytest
 from conftest import reduced_tip
 
 from adapters import get_adapter
-from harness import scenario
-from harness.outputs import output_series
-from harness.reference import reference_grid
+from harness.model import scenario
+from harness.model.outputs import output_series
+from harness.references.build import reference_grid
 
 @pytest.fixture(scope="module")
 def mech():

@@ -11,11 +11,11 @@ from __future__ import annotations
 import pytest
 
 from adapters import get_adapter
-from harness import scenario
-from harness.initial import initial_state
-from harness.metrics import case_metrics
-from harness.reference import reference_trajectory
-from harness.sampling import sample_times
+from harness.model import scenario
+from harness.neutral.start import initial_state
+from harness.measure.metrics import case_metrics
+from harness.references.build import reference_trajectory
+from harness.model.timegrid import sample_times
 
 T_END = 1.0
 MARGIN = 3.0

@@ -1,4 +1,4 @@
-"""The executor (harness.execute): one fresh process per case; a hang, a kill, a segfault or an
+"""The executor (harness.run.executor): one fresh process per case; a hang, a kill, a segfault or an
 exception in a case becomes that case's row, the other cases still run, and an interrupt kills the
 running workers.  Driven by a toy work function (defined here, run in the worker processes)."""
 
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from harness.execute import WORKER_ENV, execute
+from harness.run.executor import WORKER_ENV, execute
 
 
 @dataclass(frozen=True)

@@ -4,8 +4,8 @@ Every tolerance below was measured on this machine (exudyn 1.13.6) with margin; 
 sits next to it.  Reproduce the numbers with ``.venv/bin/python -m pytest
 tests/test_exudyn_adapter.py -m "slow or not slow" -v``.
 
-Constraint violations and energies are computed by the harness (``harness.metrics``,
-``harness.energy``) from the body states the adapter returns (DESIGN.md rule 2), never from
+Constraint violations and energies are computed by the harness (``harness.measure.metrics``,
+``harness.measure.energy``) from the body states the adapter returns (DESIGN.md rule 2), never from
 Exudyn's residuals.
 """
 
@@ -19,10 +19,10 @@ from conftest import VERIFIED_SCENES
 
 from adapters.base import RunFailure, UnsupportedCase
 from adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
-from harness.initial import initial_state
-from harness.energy import energy_balance
-from harness.metrics import case_metrics
-from harness.model import (
+from harness.neutral.start import initial_state
+from harness.measure.energy import energy_balance
+from harness.measure.metrics import case_metrics
+from harness.model.mechanism import (
     GROUND,
     Body,
     BodyForce,
@@ -32,10 +32,10 @@ from harness.model import (
     Mechanism,
     SpringDamper,
 )
-from harness.neutral_dynamics import IndeterminateAccelerations, accelerations
-from harness.outputs import output_series
-from harness.scenario import load, scenario_names
-from harness.trajectory import Trajectory
+from harness.neutral.dynamics import IndeterminateAccelerations, accelerations
+from harness.model.outputs import output_series
+from harness.model.scenario import load, scenario_names
+from harness.model.trajectory import Trajectory
 from test_generated_mechanisms import ACCELERATION_TOLERANCE, measured_acceleration_gap
 
 

@@ -1,4 +1,4 @@
-"""Generated scenario families (``harness/families.py``): the N-four-bar ``n_fourbar@N``.
+"""Generated scenario families (``harness/model/families.py``): the N-four-bar ``n_fourbar@N``.
 
 The outside check is the one-degree-of-freedom model of the parallelogram branch, written here for
 any N (unit bars, m = 1 kg, L = 1 m, crank angle φ from +x): N + 1 cranks turn about their ground
@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from harness import scenario
-from harness.branch_route import full_route
-from harness.families import FAMILY_MEMBERS, FamilyError, family_document, family_names
-from harness.outputs import output_series
-from harness.reference import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, \
+from harness.model import scenario
+from harness.references.routes import full_route
+from harness.model.families import FAMILY_MEMBERS, FamilyError, family_document, family_names
+from harness.model.outputs import output_series
+from harness.references.build import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, \
     reference_trajectory
-from harness.scenario import ScenarioError
+from harness.model.scenario import ScenarioError
 
 GRAVITY = 9.81
 #: Fields that name or describe a scene rather than its mechanics.
@@ -118,7 +118,7 @@ def test_document_is_plain_toml_data():
 def test_bad_members_are_refused_naming_family_and_problem(family, parameter, message):
     with pytest.raises(FamilyError, match=message):
         family_document(family, parameter)
-    with pytest.raises(ScenarioError, match=f"harness/families.py: {family}@{parameter}: -: "):
+    with pytest.raises(ScenarioError, match=f"harness/model/families.py: {family}@{parameter}: -: "):
         scenario.load(f"{family}@{parameter}")
 
 

@@ -12,9 +12,9 @@ from adapters import get_adapter
 from adapters.inhouse.fold import (SAFE_INDICATOR, passage_placement, passage_times,
                                    plan_passage)
 from adapters.integrators import integrator_class
-from harness import scenario
-from harness.outputs import output_series
-from harness.sampling import sample_times
+from harness.model import scenario
+from harness.model.outputs import output_series
+from harness.model.timegrid import sample_times
 
 RK4 = passage_placement(integrator_class("rk4").tableau.c)
 

@@ -30,9 +30,11 @@ import pytest
 from hypothesis import HealthCheck, event, example, given, settings
 from hypothesis import strategies as st
 
-from harness import cli, scenario
-from harness.model import GROUND, Mechanism
-from harness.scenario import ScenarioError
+from harness import cli
+
+from harness.model import scenario
+from harness.model.mechanism import GROUND, Mechanism
+from harness.model.scenario import ScenarioError
 
 DEFAULT_EXAMPLES = 400
 SIMULATE_EXAMPLES = 150
@@ -325,7 +327,7 @@ def finite_numbers(value) -> bool:
     return True
 
 
-#: How ``--json`` encodes a non-finite number (harness/jsonout.py).
+#: How ``--json`` encodes a non-finite number (harness/common/jsonout.py).
 NON_FINITE_STRINGS = {"NaN", "Infinity", "-Infinity"}
 
 

@@ -21,10 +21,10 @@ from numba import njit
 from adapters import get_adapter
 from adapters.base import RunFailure, RunGrid
 from adapters.inhouse import generated, tracing
-from harness import scenario
-from harness.assembly import AssemblyError
-from harness.generate import mechanisms
-from harness.sampling import sample_times
+from harness.model import scenario
+from harness.neutral.assembly import AssemblyError
+from harness.testing.strategies import mechanisms
+from harness.model.timegrid import sample_times
 from tests.test_compiled_path import LARGE_TRACES, PATH_BOUND
 
 RELATIVE_BOUND = 1e-13
@@ -164,7 +164,7 @@ def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypa
 @given(mech=mechanisms())
 def test_generated_functions_on_drawn_mechanisms_compute_what_the_kernels_compute(mech):
     """Mechanisms the generator was not written around (trees and ladders, planar and spatial,
-    loads, any declaration order; harness/generate.py): the right-hand side and the velocity
+    loads, any declaration order; harness/testing/strategies.py): the right-hand side and the velocity
     projection at the start and at a nearby state 1e-3 away in q and q̇, where their guards hold
     or the call is handed back (returns 0, never a different number)."""
     adapter = get_adapter("inhouse")

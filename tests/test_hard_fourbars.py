@@ -6,7 +6,7 @@ Outside checks: for the parallelogram, its one-degree-of-freedom model on the pa
 V = g (2 · ½ + 1) sin φ, so (5/3) φ̈ = −2 g cos φ, φ(0) = π/3, φ̇(0) = 0); for the stiff four-bar,
 the eigenvalues of its reduced one-degree-of-freedom equation θ̈ = f(θ, θ̇) in the crank angle,
 linearised at the start by central differences of the neutral model's accelerations
-(:mod:`harness.neutral_dynamics`), with and without the spring.
+(:mod:`harness.neutral.dynamics`), with and without the spring.
 """
 
 from __future__ import annotations
@@ -18,14 +18,14 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from adapters import get_adapter
-from harness import scenario
-from harness.assembly import assemble
-from harness.case import run_case
-from harness.energy import (coordinate_work, energy_balance, energy_scale, kinetic_energy,
+from harness.model import scenario
+from harness.neutral.assembly import assemble
+from harness.run.case import run_case
+from harness.measure.energy import (coordinate_work, energy_balance, energy_scale, kinetic_energy,
                             state_arrays)
-from harness.neutral_dynamics import accelerations
-from harness.outputs import output_series
-from harness.reference import reference_grid, reference_trajectory
+from harness.neutral.dynamics import accelerations
+from harness.model.outputs import output_series
+from harness.references.build import reference_grid, reference_trajectory
 
 GRAVITY = 9.81
 #: Largest step (s) on the 0.01 s / k ladder at which in-house rk4+direct stays stable on

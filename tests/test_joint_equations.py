@@ -1,4 +1,4 @@
-"""The neutral joint equations (harness.joint_equations): against the in-house kernels (an
+"""The neutral joint equations (harness.neutral.equations): against the in-house kernels (an
 independent implementation), on hand-computed configurations, against finite differences, and
 through the metrics (an injected 1 mm gap is reported as 1 mm)."""
 
@@ -13,11 +13,11 @@ from scipy.spatial.transform import Rotation
 from adapters.inhouse.constraints import ConstraintSystem, layout_of
 from adapters.inhouse.kinematics import assemble as inhouse_assemble
 from adapters.inhouse.states import body_states, coordinates
-from harness import scenario
-from harness.joint_equations import JointEquations
-from harness.metrics import constraint_violations, violation_series
-from harness.reference import reference_trajectory
-from harness.trajectory import BodyStates, Trajectory
+from harness.model import scenario
+from harness.neutral.equations import JointEquations
+from harness.measure.metrics import constraint_violations, violation_series
+from harness.references.build import reference_trajectory
+from harness.model.trajectory import BodyStates, Trajectory
 
 SHIPPED = scenario.scenario_names()
 # Variants covering every joint type (spatial prismatic; the translational, prismatic and

@@ -1,5 +1,5 @@
 """Every ``--json`` output is strict JSON, and what an engine library prints never reaches stdout
-(harness/jsonout.py, harness/capture.py, harness/cli.py)."""
+(harness/common/jsonout.py, harness/common/capture.py, harness/cli.py)."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import sys
 import numpy as np
 import pytest
 
-from harness import cli, jsonout
-from harness.capture import captured_output, engine_note
+from harness import cli
+
+from harness.common import jsonout
+from harness.common.capture import captured_output, engine_note
 
 
 def _refuse(token):

@@ -7,7 +7,7 @@ import pytest
 
 from adapters.inhouse.constraints import ConstraintSystem, layout_of
 from adapters.inhouse.kinematics import AssemblyError, assemble, check, rank_report
-from harness import scenario
+from harness.model import scenario
 
 SHIPPED = scenario.scenario_names()
 

@@ -24,9 +24,9 @@ from adapters.integrators import RUNNING, make_integrator, so3
 from adapters.pinocchio_adapter.adapter import solver_settings
 from adapters.pinocchio_adapter.dynamics import ConstrainedProblem
 from adapters.pinocchio_adapter.stepping import LieGroupProblem, constrained_problem
-from harness import scenario
-from harness.model import Body, InitialState, Mechanism
-from harness.reference import reference_trajectory
+from harness.model import scenario
+from harness.model.mechanism import Body, InitialState, Mechanism
+from harness.references.build import reference_trajectory
 
 FOURTH_ORDER = ["rk4", "rkn4"]
 

@@ -8,12 +8,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from adapters import get_adapter
-from harness import scenario
-from harness.energy import energy_balance, energy_scale
-from harness.metrics import case_metrics
-from harness.reference import reference_trajectory
-from harness.sampling import EVALUATION_STEP, sample_times
-from harness.trajectory import Trajectory
+from harness.model import scenario
+from harness.measure.energy import energy_balance, energy_scale
+from harness.measure.metrics import case_metrics
+from harness.references.build import reference_trajectory
+from harness.model.timegrid import EVALUATION_STEP, sample_times
+from harness.model.trajectory import Trajectory
 
 SHIPPED = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
 _ARRAYS = ("position", "quaternion", "velocity", "angular_velocity")

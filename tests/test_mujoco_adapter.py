@@ -15,10 +15,10 @@ from adapters.base import UnsupportedCase
 from adapters.mujoco_adapter import MujocoAdapter, export_mjcf
 from adapters.mujoco_adapter.build import floored_inertia
 from adapters.mujoco_adapter.methods import INTEGRATORS
-from harness.initial import initial_state
-from harness.model import BodyTorque, JointActuation, SpringDamper
-from harness.outputs import output_series
-from harness.scenario import load, scenario_names
+from harness.neutral.start import initial_state
+from harness.model.mechanism import BodyTorque, JointActuation, SpringDamper
+from harness.model.outputs import output_series
+from harness.model.scenario import load, scenario_names
 
 ADAPTER = MujocoAdapter()
 SCENARIOS = scenario_names()

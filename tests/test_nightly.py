@@ -2,7 +2,7 @@
 
 The campaign is three cheap four-bar cases (1 s at dt 1e-3 s, three timing repetitions each) in a
 temporary results root.  The regressions are injected by replacing the nightly's work function
-(``harness.nightly.case_work``, pytest ``monkeypatch``) with one that reports one case's error
+(``harness.jobs.nightly.case_work``, pytest ``monkeypatch``) with one that reports one case's error
 1000 times larger and another case's wall time 20 times longer; the adapters have no such switch.
 Measured calibrated time ratios between two plain runs: 0.78–1.2 on an idle machine, up to 2.03
 with a second test session on the same two cores — so the runs here use a time factor of 4
@@ -14,9 +14,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness import cli, nightly
-from harness.runner import CaseWork
-from harness.store import list_runs
+from harness import cli
+
+from harness.jobs import nightly
+from harness.run.campaign import CaseWork
+from harness.store.runs import list_runs
 
 CAMPAIGN = """
 description = "nightly test: three cheap four-bar cases"

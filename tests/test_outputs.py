@@ -1,10 +1,10 @@
-"""Orientation arithmetic of harness/outputs.py that the verdict's motion check relies on."""
+"""Orientation arithmetic of harness/model/outputs.py that the verdict's motion check relies on."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from harness.outputs import rotation_between, wrap_angle
+from harness.model.outputs import rotation_between, wrap_angle
 
 
 def _about_z(angle) -> np.ndarray:

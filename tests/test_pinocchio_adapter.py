@@ -20,11 +20,11 @@ from adapters.pinocchio_adapter.adapter import solver_settings
 from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, pseudo_inverse
 from adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
 from adapters.pinocchio_adapter.state import joint_state
-from harness.initial import initial_state
-from harness.neutral_dynamics import accelerations, start_accelerations
-from harness.model import GROUND, Body, InitialState, Joint, Mechanism
-from harness.outputs import output_series
-from harness.scenario import load, scenario_names
+from harness.neutral.start import initial_state
+from harness.neutral.dynamics import accelerations, start_accelerations
+from harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
+from harness.model.outputs import output_series
+from harness.model.scenario import load, scenario_names
 
 ADAPTER = get_adapter("pinocchio")
 

@@ -16,10 +16,10 @@ from conftest import VERIFIED_SCENES
 
 from adapters.base import UnsupportedCase
 from adapters.pybullet_adapter import PybulletAdapter, bullet_world
-from harness.initial import initial_state
-from harness.model import Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism
-from harness.scenario import load, scenario_names
-from harness.trajectory import BodyStates, Trajectory
+from harness.neutral.start import initial_state
+from harness.model.mechanism import Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism
+from harness.model.scenario import load, scenario_names
+from harness.model.trajectory import BodyStates, Trajectory
 
 ADAPTER = PybulletAdapter()
 SCENARIOS = VERIFIED_SCENES
@@ -139,7 +139,7 @@ def test_inertia_set_explicitly(scenario):
     turned by its inertial frame's world orientation against A J̄ Aᵀ from the harness's start
     (a misoriented inertia frame fails; sorted moments would not see it).  Measured difference
     ≤ 5.5e-16 of the largest moment; bound 1e-12 (two computation paths, the cross-CPU floor)."""
-    from harness.outputs import body_rotations
+    from harness.model.outputs import body_rotations
 
     mech = load(scenario)
     model = ADAPTER.build(mech)

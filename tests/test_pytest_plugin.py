@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.case_runner import CaseResult, CaseRunner, ToleranceError, case_label, case_spec
-from harness.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
+from harness.testing.cases import CaseResult, CaseRunner, ToleranceError, case_label, case_spec
+from harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
                                 constraint_violation_series)
-from harness.trajectory import Trajectory
+from harness.model.trajectory import Trajectory
 
 README = Path(__file__).resolve().parent.parent / "README.md"
 SECTION = "## Tolerance assertions in your pytest suite"
@@ -75,7 +75,7 @@ def test_selection_options_skip_other_cases_with_the_reason(tmp_path):
 
 
 USER_TESTS = '''
-from harness.tolerances import assert_close_to_reference, assert_constraint_violation_below
+from harness.testing.tolerances import assert_close_to_reference, assert_constraint_violation_below
 
 
 def test_sensible_tolerance(mbh_runner):
@@ -207,7 +207,7 @@ def test_a_case_without_an_entry_is_an_error(tmp_path):
 
 
 def test_selection_names_unknown_scenarios_and_adapters():
-    from harness.case_runner import Selection
+    from harness.testing.cases import Selection
 
     with pytest.raises(ToleranceError, match=r"--mbh-adapters: unknown mujocco \(known: .*mujoco"):
         Selection.parse("fourbar", "mujocco")

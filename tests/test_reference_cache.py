@@ -9,9 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import scenario
-from harness.reference import (GRID_STEP, REFERENCE_VERSION, _paths, _read_cache, _stale_reason,
-                               load_or_build)
+from harness.model import scenario
+from harness.model.timegrid import GRID_STEP
+from harness.references.build import load_or_build, routes
+from harness.store.reference_files import (ARRAYS, REFERENCE_VERSION, read_reference,
+                                           reference_paths, stale_reason, stored_reference)
 
 SHIPPED = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
 #: A four-bar of 20 ms: a reference build takes ~2 s (measured), enough to overlap builds.
@@ -35,8 +37,9 @@ def _build_in_child(path: str, cache: str) -> str:
     import os
 
     os.environ["MBH_CACHE_DIR"] = cache
-    from harness import scenario as child_scenario
-    from harness.reference import _paths as child_paths, load_or_build as child_load
+    from harness.model import scenario as child_scenario
+    from harness.references.build import load_or_build as child_load
+    from harness.store.reference_files import reference_paths as child_paths
 
     mech = child_scenario.load(path)
     trajectory, _ = child_load(mech)
@@ -49,10 +52,10 @@ def _build_in_child(path: str, cache: str) -> str:
 @pytest.mark.parametrize("name", SHIPPED)
 def test_shipped_references_pass_the_metadata_check(name):
     mech = scenario.load(name)
-    data_path, info_path = _paths(mech)
-    cached = _read_cache(mech, data_path, info_path)
+    cached = read_reference(mech, routes(mech))
     assert cached is not None, f"{name}: shipped reference rejected"
-    assert _stale_reason(mech, *reversed(cached)) == ""
+    assert stale_reason(mech, *reversed(cached), routes(mech)) == ""
+    np.testing.assert_array_equal(stored_reference(mech).position, cached[0].position)
 
 
 def test_processes_building_the_same_reference_at_once_share_one_file(tiny, tmp_path):
@@ -60,7 +63,7 @@ def test_processes_building_the_same_reference_at_once_share_one_file(tiny, tmp_
     context = multiprocessing.get_context("spawn")
     with context.Pool(3) as pool:
         digests = pool.starmap(_build_in_child, [(str(tmp_path / "fourbar.toml"), str(cache))] * 3)
-    data_path, info_path = _paths(mech)
+    data_path, info_path = reference_paths(mech)
     assert len(set(digests)) == 1 and digests[0].endswith(" 21")
     assert sorted(p.name for p in cache.iterdir()) == sorted([data_path.name, info_path.name])
     trajectory, info = load_or_build(mech)  # the shared file passes the check: no rebuild
@@ -77,34 +80,40 @@ def test_processes_building_the_same_reference_at_once_share_one_file(tiny, tmp_
 def test_metadata_mismatch_is_detected_and_rebuilt(tiny, edit, reason):
     mech, _ = tiny
     trajectory, info = load_or_build(mech)
-    data_path, info_path = _paths(mech)
+    data_path, info_path = reference_paths(mech)
     stored = json.loads(info_path.read_text())
     edit(stored)
     info_path.write_text(json.dumps(stored))
-    assert reason in _stale_reason(mech, stored, trajectory)
+    assert reason in stale_reason(mech, stored, trajectory, routes(mech))
     rebuilt, rebuilt_info = load_or_build(mech)
     stored_now = json.loads(info_path.read_text())
     assert stored_now["agreement"] == rebuilt_info["agreement"] == info["agreement"]
-    assert _stale_reason(mech, stored_now, rebuilt) == ""
+    assert stale_reason(mech, stored_now, rebuilt, routes(mech)) == ""
     np.testing.assert_array_equal(rebuilt.position, trajectory.position)
+
+
+def test_a_report_reads_a_stored_reference_and_never_builds_one(tiny):
+    mech, cache = tiny
+    assert stored_reference(mech) is None and not cache.exists()
+    trajectory, _ = load_or_build(mech)
+    np.testing.assert_array_equal(stored_reference(mech).position, trajectory.position)
 
 
 def test_arrays_off_the_grid_or_a_broken_file_rebuild(tiny):
     mech, _ = tiny
     trajectory, info = load_or_build(mech)
-    data_path, info_path = _paths(mech)
+    data_path, info_path = reference_paths(mech)
     np.savez_compressed(data_path, times=trajectory.times[:-1], position=trajectory.position[:-1],
                         quaternion=trajectory.quaternion[:-1], velocity=trajectory.velocity[:-1],
                         angular_velocity=trajectory.angular_velocity[:-1])
-    assert "shape" in _stale_reason(mech, info, _read_cache_unchecked(data_path))
+    assert "shape" in stale_reason(mech, info, _read_cache_unchecked(data_path))
     assert load_or_build(mech)[0].n_samples == 21
     data_path.write_bytes(b"not a zip file")
     assert load_or_build(mech)[0].n_samples == 21
 
 
 def _read_cache_unchecked(data_path: Path):
-    from harness.reference import _ARRAYS
-    from harness.trajectory import Trajectory
+    from harness.model.trajectory import Trajectory
 
     with np.load(data_path) as data:
-        return Trajectory(**{key: data[key] for key in _ARRAYS})
+        return Trajectory(**{key: data[key] for key in ARRAYS})

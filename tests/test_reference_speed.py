@@ -1,9 +1,9 @@
-"""The compiled right-hand sides of the neutral reference routes (``harness/neutral_kernels.py``,
+"""The compiled right-hand sides of the neutral reference routes (``harness/neutral/dynamics_kernels.py``,
 issue 14) compute what the numpy measuring stick computes, and the routes built on them reproduce
 the shipped references.
 
-Two levels: one state at a time against :mod:`harness.joint_equations` and
-:mod:`harness.neutral_dynamics` (every scene, every joint and load type), and whole routes against
+Two levels: one state at a time against :mod:`harness.neutral.equations` and
+:mod:`harness.neutral.dynamics` (every scene, every joint and load type), and whole routes against
 the stored route A of ``scenarios/references`` (short spans here, the full runs marked slow).
 Bounds are relative to the quantity's size with a floor of 1 (m, rad, m/s², …): the two paths
 differ only in the order of floating-point operations, and no bound is below 1e-12 relative.
@@ -16,25 +16,25 @@ import dataclasses
 import numpy as np
 import pytest
 
-from harness import scenario
+from harness.model import scenario
 from scipy.spatial.transform import Rotation
 
-from harness.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble,
+from harness.neutral.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble,
                               newton_positions)
-from harness.branch_route import (FULL_ROUTE_BAUMGARTE, BranchEquations, full_route,
+from harness.references.routes import (FULL_ROUTE_BAUMGARTE, BranchEquations, full_route,
                                   reduced_route)
-from harness.joint_equations import twist_vector
-from harness.model import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint,
+from harness.neutral.equations import twist_vector
+from harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint,
                            JointActuation, Mechanism)
-from harness.neutral_dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
+from harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
                                       UNIQUENESS_RATIO, IndeterminateAccelerations, accelerations,
                                       gamma, twist_mass_and_forces)
-from harness.neutral_kernels import (body_table, branch_pose, full_rates, mass_and_forces,
+from harness.neutral.dynamics_kernels import (body_table, branch_pose, full_rates, mass_and_forces,
                                      mass_spread)
-from harness.neutral_kernels import gamma as compiled_gamma
-from harness.reference import (AGREEMENT_LIMIT, reference_grid, reference_trajectory,
+from harness.neutral.dynamics_kernels import gamma as compiled_gamma
+from harness.references.build import (AGREEMENT_LIMIT, reference_grid, reference_trajectory,
                                route_difference)
-from harness.trajectory import BodyStates
+from harness.model.trajectory import BodyStates
 
 #: The scenes whose references are built by the neutral routes.
 NEUTRAL_SCENES = ("andrews", "bricard", "double_fourbar", "parallelogram_fourbar", "n_fourbar@4")
@@ -144,7 +144,7 @@ def test_every_load_type_is_compiled():
 @pytest.mark.parametrize("name", NEUTRAL_SCENES)
 def test_compiled_newton_is_the_assembly_newton(name):
     """The reduced route's pose at θ 0.01 rad (or m) past three reference samples, from the
-    sample: :func:`branch_pose` against :func:`harness.assembly.newton_positions` on the numpy
+    sample: :func:`branch_pose` against :func:`harness.neutral.assembly.newton_positions` on the numpy
     rows.  Measured worst 6.7e-16 (m, and quaternion components); bound 1e-12."""
     mech = scenario.load(name)
     start = assemble(mech).states

@@ -23,7 +23,7 @@ import pytest
 
 from harness import cli
 from harness.report import build
-from harness.store import RunStore
+from harness.store.runs import RunStore
 
 #: The tiny campaign of the fixture run.
 CAMPAIGN = """\

@@ -14,13 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness import scenario
-from harness.campaign import CaseSpec
-from harness.case_row import error_row
-from harness.outputs import output_series
-from harness.reference import reference_trajectory
+from harness.model import scenario
+from harness.run.spec import CaseSpec
+from harness.run.row import error_row
+from harness.model.outputs import output_series
+from harness.references.build import reference_trajectory
 from harness.report import build, failures
-from harness.store import RunStore
+from harness.store.runs import RunStore
 
 SCENE = "double_fourbar"
 T_END = 2.0
@@ -194,7 +194,7 @@ def test_integration_kind(adapter, method, kind):
 
 def test_hard_campaign_covers_every_hard_scene():
     from adapters import adapter_names
-    from harness.campaign import load_campaign
+    from harness.run.spec import load_campaign
 
     hard = load_campaign("hard")
     scenes = {name for name in scenario.scenario_names()

@@ -14,15 +14,15 @@ import pandas as pd
 import pytest
 
 from adapters import get_adapter
-from harness import scenario
-from harness.rank import rank_analysis
-from harness.reference import reference_trajectory
+from harness.model import scenario
+from harness.neutral.mobility import rank_analysis
+from harness.references.build import reference_trajectory
 from harness.report.figures import (jacobian_condition, pareto_front, stability_map,
                                     time_history, work_precision)
 from harness.report.mechanism import (REFERENCE_KEY, mechanism_animation,
                                       mechanism_snapshots)
 from harness.report.style import Figure, outcome
-from harness.sampling import sample_times
+from harness.model.timegrid import sample_times
 
 SVG = "{http://www.w3.org/2000/svg}"
 MARKUP = "<b>x</b>"

@@ -14,8 +14,8 @@ import pytest
 
 from adapters import adapter_names, get_adapter
 from adapters.integrators.base import Integrator, StepFailure
-from harness.metrics import violation_series
-from harness.scenario import load
+from harness.measure.metrics import violation_series
+from harness.model.scenario import load
 
 DT = 1e-3
 #: Ten steps, sampled after every step: a failure in step k keeps the samples 0 … (k − 1)·DT.

@@ -1,4 +1,4 @@
-"""Campaign runs end to end (harness.runner, harness.sweep, ``mbh run/runs/show/compare``):
+"""Campaign runs end to end (harness.run.campaign, harness.run.sweep, ``mbh run/runs/show/compare``):
 the same rows through the process pool and a Dask LocalCluster, failures as rows, Ctrl-C and
 resume, a diverging method, a bad campaign file refused before anything runs, the stability
 sweep's bisection."""
@@ -21,13 +21,13 @@ import pandas as pd
 import pytest
 
 from adapters import adapter_names
-from harness import environment
-from harness.campaign import load_campaign
-from harness.runner import CaseWork, run_campaign
-from harness.sampling import EVALUATION_STEP
-from harness.store import RunStore, list_runs
-from harness.sweep import Bisection, stability_sweep
-from harness.verdict import Bounds
+from harness.common import environment
+from harness.run.spec import load_campaign
+from harness.run.campaign import CaseWork, run_campaign
+from harness.model.timegrid import EVALUATION_STEP
+from harness.store.runs import RunStore, list_runs
+from harness.run.sweep import Bisection, stability_sweep
+from harness.measure.verdict import Bounds
 
 MBH = [sys.executable, "-m", "harness.cli"]
 

@@ -7,11 +7,13 @@ import pytest
 
 from scipy.spatial.transform import Rotation
 
-from harness import cli, scenario
-from harness.model import PrescribedJointRate, PrescribedPointVelocity
-from harness.outputs import output_series
-from harness.scenario import ScenarioError, inertia_problem
-from harness.trajectory import Trajectory
+from harness import cli
+
+from harness.model import scenario
+from harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
+from harness.model.outputs import output_series
+from harness.model.scenario import ScenarioError, inertia_problem
+from harness.model.trajectory import Trajectory
 
 BAD = """
 kind = "spatial"

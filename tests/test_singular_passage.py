@@ -3,7 +3,7 @@
 The rank-revealing pieces: :func:`adapters.inhouse.linalg.truncated_solve`, the range-space
 acceleration :func:`adapters.inhouse.dynamics.range_space_acceleration`, the truncated projection
 of :class:`adapters.inhouse.stabilisation.DirectCorrection`; and
-:func:`harness.conditioning.label_failure`.
+:func:`harness.neutral.conditioning.label_failure`.
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.kinematics import common_start
 from adapters.inhouse.dynamics import Dynamics, range_space_acceleration, solve_augmented
 from adapters.inhouse.linalg import truncated_solve
-from harness import scenario
-from harness.case import run_case
-from harness.conditioning import conditioning
-from harness.outputs import output_series
-from harness.reference import reference_trajectory
+from harness.model import scenario
+from harness.run.case import run_case
+from harness.neutral.conditioning import conditioning
+from harness.model.outputs import output_series
+from harness.references.build import reference_trajectory
 
 
 def test_truncated_solve_is_the_minimum_norm_solution_without_the_lost_directions():

@@ -1,4 +1,4 @@
-"""The result store (harness.store): rows, parts, resume, cache, migration, listing, comparison.
+"""The result store (harness.store.runs): rows, parts, resume, cache, migration, listing, comparison.
 
 The committed fixture ``tests/data/store_v1/`` is a run written by :func:`write_v1_store` below,
 the schema-1 writer kept only here.  Regenerate it with ``.venv/bin/python tests/test_store.py``.
@@ -20,10 +20,12 @@ import pyarrow.parquet as pq
 import pytest
 
 import mbh
-from harness import environment, run_compare, store
-from harness.campaign import load_campaign
-from harness.store_schema import SCHEMA_VERSION, SchemaError
-from harness.trajectory import Trajectory
+from harness.common import environment
+from harness.store import compare as run_compare
+from harness.store import runs as store
+from harness.run.spec import load_campaign
+from harness.store.schema import SCHEMA_VERSION, SchemaError
+from harness.model.trajectory import Trajectory
 
 V1_ROOT = Path(__file__).parent / "data" / "store_v1"
 V1_RUN = "20260101T000000Z-v1demo"
@@ -31,7 +33,7 @@ V1_RUN = "20260101T000000Z-v1demo"
 
 @dataclass(frozen=True)
 class Spec:
-    """The CaseSpec attributes the store reads (harness.campaign.CaseSpec has more)."""
+    """The CaseSpec attributes the store reads (harness.run.spec.CaseSpec has more)."""
 
     scenario: str
     adapter: str
@@ -378,7 +380,7 @@ def test_a_cached_row_stored_again_carries_the_new_run_id(root):
 # --- schema migration -----------------------------------------------------------------------
 
 def write_v1_store(root: Path) -> None:
-    """Write the schema-1 run :data:`V1_RUN` under ``root`` (see harness.store_schema).
+    """Write the schema-1 run :data:`V1_RUN` under ``root`` (see harness.store.schema).
 
     Schema 1: rows with ``wall_time`` (no ``wall_time_s``, no per-step or per-simulated-second
     time), part files without a version in their metadata, a manifest without

@@ -1,4 +1,4 @@
-"""The stick's verdict (harness/verdict.py, harness/branch.py): corrupted copies of the four-bar's
+"""The stick's verdict (harness/measure/verdict.py, harness/measure/branch.py): corrupted copies of the four-bar's
 verified reference must lose ``ok`` at the right time with the right reason; honest runs keep it.
 
 Measured on the four-bar reference (4 s, sampled here every 10 ms): size ℓ = 5.74 m, so the gap
@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from adapters import get_adapter
-from harness import scenario
-from harness.case import run_case
-from harness.outputs import output_series
-from harness.reference import reference_trajectory
-from harness.trajectory import Trajectory
-from harness.verdict import Bounds, characteristic_length, joint_violations, judge
+from harness.model import scenario
+from harness.run.case import run_case
+from harness.model.outputs import output_series
+from harness.references.build import reference_trajectory
+from harness.model.trajectory import Trajectory
+from harness.measure.verdict import Bounds, characteristic_length, joint_violations, judge
 
 STRIDE = 10  # reference samples per test sample: a 10 ms grid
 

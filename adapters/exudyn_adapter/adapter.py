@@ -25,8 +25,8 @@ from adapters.exudyn_adapter.methods import (
     _write_period,
 )
 from adapters.exudyn_adapter.system import ExudynSystem
-from harness.model import PLANAR_JOINT_TYPES, Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import PLANAR_JOINT_TYPES, Mechanism
+from harness.model.trajectory import BodyStates
 
 
 @dataclass(frozen=True)

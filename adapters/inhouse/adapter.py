@@ -25,8 +25,8 @@ from adapters.integrators import integrator_class, integrator_names, integrator_
 from adapters.inhouse.newton_euler import NewtonEuler
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import STRATEGIES
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning,
                 NewtonEuler.name: NewtonEuler}

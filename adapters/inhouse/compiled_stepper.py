@@ -37,8 +37,8 @@ from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabil
 from adapters.inhouse.states import body_states
 from adapters.integrators import integrator_class
 from adapters.integrators.nystrom import NystromIntegrator
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 #: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_steps`.
 COMPILED_FORMULATIONS = {NoStabilisation.name: compiled.PLAIN, Baumgarte.name: compiled.PLAIN,

@@ -24,7 +24,7 @@ import numpy as np
 from adapters.inhouse import kernels
 from adapters.inhouse.banded import Sparsity, sparsity
 from adapters.inhouse.bodykin import PLANAR_NC, SPATIAL_NC
-from harness.model import GROUND, Joint, Mechanism
+from harness.model.mechanism import GROUND, Joint, Mechanism
 
 _Z = np.array([0.0, 0.0, 1.0])
 

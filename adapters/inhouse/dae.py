@@ -81,7 +81,7 @@ from adapters.base import RunFailure, describe
 from adapters.inhouse.constraints import ConstraintSystem
 from adapters.inhouse.dynamics import Dynamics, solve_augmented
 from adapters.inhouse.rank import full_pivot_elimination
-from harness.model import Mechanism
+from harness.model.mechanism import Mechanism
 
 FORMS = ("ggl", "index3")
 JACOBIANS = ("kernels", "ida")

@@ -23,8 +23,8 @@ from adapters.inhouse.kinematics import common_start
 from adapters.inhouse.stabilisation import Formulation
 from adapters.inhouse.states import body_states
 from adapters.integrators import RUNNING, make_integrator
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 _INTEGRATOR_COUNTERS = {"rhs_evals": "nfev", "jacobian_evals": "njev", "factorizations": "nlu",
                         "newton_iterations": "n_newton"}

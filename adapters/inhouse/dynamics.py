@@ -28,7 +28,7 @@ from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotat
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, skippable,
                                      truncated_solve, weighted_gram)
-from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
 @njit(cache=True, inline="always")

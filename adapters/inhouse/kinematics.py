@@ -13,7 +13,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
 from adapters.inhouse.rank import RankReport, rank_analysis
 from adapters.inhouse.states import coordinates
-from harness.model import Mechanism
+from harness.model.mechanism import Mechanism
 
 #: Assembly stops when max |Φ| falls below this (m, rad, or dimensionless).
 ASSEMBLY_TOLERANCE = 1e-13
@@ -106,7 +106,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
 def common_start(mech: Mechanism) -> Assembly:
     """The harness's common start (DESIGN.md rule 3) in absolute coordinates.
 
-    Every engine starts from :func:`harness.initial.initial_state`; this converts it to (q, q̇)
+    Every engine starts from :func:`harness.neutral.start.initial_state`; this converts it to (q, q̇)
     (planar angles taken on the branch of :func:`reference_coordinates`, so that the prismatic
     angle rows see no 2π) and polishes it onto the in-house joint equations: Newton–Raphson on Φ
     without the driver (usually no iteration: the start already satisfies the neutral equations
@@ -118,7 +118,7 @@ def common_start(mech: Mechanism) -> Assembly:
     AssemblyError
         When the polish does not converge (the two formulations' joint equations disagree).
     """
-    from harness.initial import initial_state
+    from harness.neutral.start import initial_state
 
     layout = layout_of(mech)
     q, v = coordinates(layout, initial_state(mech))

@@ -35,7 +35,7 @@ from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction
 from adapters.inhouse.fold import SAFE_INDICATOR
 from adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
 from adapters.inhouse.states import body_states
-from harness.model import Mechanism
+from harness.model.mechanism import Mechanism
 
 
 class Formulation(SecondOrderSystem):

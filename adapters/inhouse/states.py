@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from adapters.inhouse.constraints import Layout
-from harness.trajectory import BodyStates, Trajectory
+from harness.model.trajectory import BodyStates, Trajectory
 
 
 def _e_matrix(theta: np.ndarray) -> np.ndarray:

@@ -16,9 +16,9 @@ from adapters.mujoco_adapter.methods import STAGES, _check_params, _configured, 
 from adapters.mujoco_adapter.state import _body_states
 from adapters.mujoco_adapter.state import _start as _set_start
 from adapters.mujoco_adapter.stepping import Stepping
-from harness.initial import initial_state
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.neutral.start import initial_state
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 
 def _notes(built: MujocoModel, model: mujoco.MjModel) -> list[str]:

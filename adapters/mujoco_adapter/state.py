@@ -12,8 +12,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from adapters.mujoco_adapter.build import MujocoModel, _quat
-from harness.model import GROUND
-from harness.trajectory import BodyStates
+from harness.model.mechanism import GROUND
+from harness.model.trajectory import BodyStates
 
 #: Largest allowed difference between the harness's initial state and MuJoCo's version of it.
 INITIAL_TOLERANCE = 1e-12

@@ -21,9 +21,9 @@ from adapters.pinocchio_adapter.build import PinocchioModel, build_model
 from adapters.pinocchio_adapter.dynamics import SolverSettings
 from adapters.pinocchio_adapter.state import body_states, joint_state
 from adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
-from harness.initial import initial_state
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.neutral.start import initial_state
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 _PIN_DEFAULTS = pin.ProximalSettings()
 #: Parameters every method takes, at Pinocchio's own defaults (``ProximalSettings()`` as

@@ -1,4 +1,4 @@
-"""Translate a neutral :class:`~harness.model.Mechanism` into a Pinocchio model.
+"""Translate a neutral :class:`~harness.model.mechanism.Mechanism` into a Pinocchio model.
 
 The spanning tree of the mechanism becomes Pinocchio's kinematic tree in joint coordinates; every
 cut joint becomes loop-closure constraints of Pinocchio's constraint-dynamics API
@@ -33,8 +33,8 @@ import numpy as np
 import pinocchio as pin
 
 from adapters.base import UnsupportedCase
-from harness.model import GROUND, Body, Joint, JointActuation, Mechanism
-from harness.topology import SpanningTree, spanning_tree
+from harness.model.mechanism import GROUND, Body, Joint, JointActuation, Mechanism
+from harness.model.topology import SpanningTree, spanning_tree
 
 #: Closure cost of a joint type Pinocchio cannot close; large enough that a tree avoids it.
 NO_CLOSURE = 1000
@@ -77,7 +77,7 @@ class PinocchioModel:
 
 
 def closure_equations(planar: bool):
-    """Closure cost per joint type for :func:`harness.topology.spanning_tree`.
+    """Closure cost per joint type for :func:`harness.model.topology.spanning_tree`.
 
     Parameters
     ----------

@@ -36,7 +36,7 @@ import pinocchio as pin
 from adapters.integrators.base import StepFailure
 from adapters.pinocchio_adapter.build import PinocchioModel
 from adapters.pinocchio_adapter.state import frame_jacobian
-from harness.model import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
+from harness.model.mechanism import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
 
 
 @dataclass(frozen=True)

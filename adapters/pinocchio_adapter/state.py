@@ -11,10 +11,10 @@ import numpy as np
 import pinocchio as pin
 
 from adapters.pinocchio_adapter.build import PinocchioModel
-from harness.trajectory import BodyStates
+from harness.model.trajectory import BodyStates
 
 #: Pose error (m, rad) at which the configuration solve stops.  Measured floor on 6200 generated
-#: mechanisms (harness.generate, sizes 1–3.6 m): at most 9.0e-16, so 11× margin.
+#: mechanisms (harness.testing.strategies, sizes 1–3.6 m): at most 9.0e-16, so 11× margin.
 POSE_TOL = 1e-14
 #: Gauss–Newton iterations allowed for the configuration solve.
 POSE_MAX_ITER = 50

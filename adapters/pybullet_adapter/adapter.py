@@ -15,8 +15,8 @@ from adapters.pybullet_adapter.loads import _loaded_steps
 from adapters.pybullet_adapter.quiet import pybullet
 from adapters.pybullet_adapter.state import _read_states
 from adapters.pybullet_adapter.world import bullet_world
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 #: A run has diverged when a centre of mass leaves a ball this many times the mechanism's size,
 #: or a speed exceeds this many times the size per second (on top of the common check of

@@ -1,4 +1,4 @@
-"""Lay out a neutral :class:`~harness.model.Mechanism` as a Bullet multibody: spanning tree, links,
+"""Lay out a neutral :class:`~harness.model.mechanism.Mechanism` as a Bullet multibody: spanning tree, links,
 tree joints and cut joints, collected in a :class:`PybulletModel` (no Bullet client is involved).
 
 Model
@@ -7,7 +7,7 @@ Model
   frame* sits at its tree joint's point and is parallel to the world in the reference
   configuration; its inertial (centre-of-mass) frame is the body's principal frame.  Joint
   coordinate zero is therefore the scenario's reference configuration.
-* Tree joints (from :func:`harness.topology.spanning_tree`) map to Bullet joints: revolute →
+* Tree joints (from :func:`harness.model.topology.spanning_tree`) map to Bullet joints: revolute →
   ``JOINT_REVOLUTE``; prismatic and translational → ``JOINT_PRISMATIC`` (which also locks rotation);
   spherical → ``JOINT_SPHERICAL``.  Bullet's multibody has no universal or cylindrical joint: each is
   built as two single-degree-of-freedom joints through one massless connector link (revolute +
@@ -26,8 +26,8 @@ import numpy as np
 
 from adapters.base import UnsupportedCase
 from adapters.pybullet_adapter.quiet import pybullet
-from harness.model import GROUND, Joint, Mechanism
-from harness.topology import SpanningTree, spanning_tree
+from harness.model.mechanism import GROUND, Joint, Mechanism
+from harness.model.topology import SpanningTree, spanning_tree
 
 #: Closure cost of a cut joint type Bullet cannot close on a multibody (never chosen if avoidable).
 _UNCLOSABLE = 1000
@@ -127,7 +127,7 @@ class PybulletModel:
 
 
 def closure_equations(mech: Mechanism):
-    """The closure-cost function of :func:`harness.topology.spanning_tree` for Bullet.
+    """The closure-cost function of :func:`harness.model.topology.spanning_tree` for Bullet.
 
     Spherical cuts and planar revolute cuts take one point-to-point constraint (3 equations);
     Bullet offers no multibody constraint for the other joint types (:data:`_UNCLOSABLE`).

@@ -16,8 +16,8 @@ import numpy as np
 from adapters.pybullet_adapter.build import PybulletModel
 from adapters.pybullet_adapter.quiet import pybullet
 from adapters.pybullet_adapter.state import _Pose, _poses, _read_states
-from harness.model import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
-from harness.trajectory import BodyStates
+from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from harness.model.trajectory import BodyStates
 
 
 def _tree_actuation(model: PybulletModel) -> list[tuple[int, float]]:

@@ -19,8 +19,8 @@ from scipy.spatial.transform import Rotation
 
 from adapters.pybullet_adapter.build import PybulletModel, _TreeJoint
 from adapters.pybullet_adapter.quiet import pybullet
-from harness.model import Mechanism
-from harness.trajectory import BodyStates
+from harness.model.mechanism import Mechanism
+from harness.model.trajectory import BodyStates
 
 # ----------------------------------------------------------------------------------------------
 # Kinematics shared by the state conversion and the loads

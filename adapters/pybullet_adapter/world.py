@@ -21,7 +21,7 @@ import numpy as np
 from adapters.pybullet_adapter.build import PybulletModel, _Link
 from adapters.pybullet_adapter.quiet import _quiet_output, pybullet
 from adapters.pybullet_adapter.state import _quat_xyzw, _reset_state
-from harness.initial import initial_state
+from harness.neutral.start import initial_state
 
 #: Stand-in for "no limit" in Bullet settings that take a finite number (N, N·m, rad/s, m/s).
 _HUGE = 1e30

@@ -1,7 +1,7 @@
 """Build a run's report: collect everything from the stored run into a :class:`Report`, then write
 it as one self-contained HTML file (:func:`render_html`) and/or a PDF (:mod:`harness.report.pdf`).
 
-Only stored results are read (:class:`harness.store.RunStore`: case rows, sweeps, trajectories,
+Only stored results are read (:class:`harness.store.runs.RunStore`: case rows, sweeps, trajectories,
 the manifest) plus the seed table stored beside the run (:mod:`harness.report.seed_compare`);
 nothing is re-run.  Drawings of a mechanism need its scenario file as it was when the run was
 made: a scenario whose content hash differs from the run's manifest (or that no longer loads) is
@@ -24,13 +24,14 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from harness import scenario as scenarios
-from harness.reference import ReferenceError, reference_trajectory
+from harness.model import scenario as scenarios
+from harness.store.reference_files import stored_reference
 from harness.report import failures, figures, mechanism, seed_compare, summary
 from harness.report.summary import Table
-from harness.scenario import ScenarioError
-from harness.run_compare import compare_runs
-from harness.store import RunStore, list_runs
+from harness.model.scenario import ScenarioError
+from harness.measure.verdict import DEFAULT_ACCURACY
+from harness.store.compare import compare_runs
+from harness.store.runs import RunStore, list_runs
 
 #: Output formats :func:`build_report` writes.
 FORMATS = ("html", "pdf")
@@ -152,8 +153,6 @@ def _open(run_id: str, root) -> RunStore:
 
 def _campaign_accuracy(manifest: dict) -> float:
     """The run's accuracy threshold (rad or m) from the stored campaign file."""
-    from harness.campaign import DEFAULT_ACCURACY
-
     try:
         document = tomllib.loads(manifest.get("campaign_text") or "")
     except tomllib.TOMLDecodeError:
@@ -179,12 +178,12 @@ def _mechanism(name: str, manifest: dict, report: Report):
 
 
 def _reference(mech, report: Report):
-    try:
-        return reference_trajectory(mech)
-    except ReferenceError as error:
-        report.omit("histories", f"{mech.name}: no verified reference ({error}); its time "
+    """``mech``'s stored reference, or None (noted in ``report``): a report never builds one."""
+    reference = stored_reference(mech)
+    if reference is None:
+        report.omit("histories", f"{mech.name}: no verified reference is stored for it; its time "
                                  f"histories show the case alone.")
-        return None
+    return reference
 
 
 def _trajectory(store: RunStore, row, report: Report, section: str):

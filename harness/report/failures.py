@@ -14,7 +14,7 @@ sweep covers it.  Per scene the section holds
   near-singular positions, which fail there, which engines cannot represent the scene, how the
   largest stable step of explicit integration compares with implicit integration.
 
-Near-singular positions and failures *at* them are defined in :mod:`harness.conditioning` (the
+Near-singular positions and failures *at* them are defined in :mod:`harness.neutral.conditioning` (the
 same definition labels a failed run's reason).  Only the joint rows count: a dead centre of a slider-crank, where Φ_q keeps its rank and only the
 driven coordinate stops determining the others, is not a near-singular position here.
 """
@@ -31,16 +31,15 @@ import numpy as np
 import pandas as pd
 from matplotlib.lines import Line2D
 
-from adapters import get_adapter
-from harness import scenario as scenarios
-from harness.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED, Conditioning,
+from harness.model import scenario as scenarios
+from harness.neutral.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED, Conditioning,
                                   conditioning, nearest_passage)
-from harness.model import Mechanism
-from harness.reference import ReferenceError, reference_trajectory
+from harness.model.mechanism import Mechanism
+from harness.store.reference_files import stored_reference
 from harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure, apply_style,
                                   is_missing, new_figure, outcome, plain, render)
 from harness.report.summary import Table
-from harness.scenario import ScenarioError
+from harness.model.scenario import ScenarioError
 
 #: Scenario tag that puts a scene into the section.
 HARD_TAG = "hard"
@@ -74,20 +73,22 @@ _ENGINE_KIND = {
 }
 
 
-@functools.cache
+#: The in-house adapter's aliases are both fourth-order Runge–Kutta (explicit); a test checks this
+#: against the adapter's own resolution, since a report never asks an adapter.
+_INHOUSE_ALIAS_KIND = {"default": "explicit", "best": "explicit"}
+
+
 def integration_kind(adapter: str, method: str) -> str | None:
     """``"explicit"``, ``"implicit"`` or None (not known) for a method string of an adapter.
 
-    In-house aliases (``default``, ``best``) are resolved by the adapter's own
-    :meth:`~adapters.base.Adapter.method_spec`; the integrator family is the part of the method
-    name before ``+``.
+    The in-house integrator family is the part of the method name before ``+``; its aliases
+    (``default``, ``best``) are in :data:`_INHOUSE_ALIAS_KIND`.
     """
+    name = method.partition(":")[0]
     if adapter != "inhouse":
-        return _ENGINE_KIND.get(adapter, {}).get(method.partition(":")[0])
-    try:
-        name = get_adapter(adapter).method_spec(method)[0].name
-    except ValueError:
-        return None
+        return _ENGINE_KIND.get(adapter, {}).get(name)
+    if name in _INHOUSE_ALIAS_KIND:
+        return _INHOUSE_ALIAS_KIND[name]
     return _INHOUSE_KIND.get(name.partition("+")[0])
 
 
@@ -439,11 +440,10 @@ def _conditioning(name: str, mech: Mechanism | None, frame: pd.DataFrame, manife
         omit(f"{name}: the scenario file changed since the run (content hash {str(stored)[:12]} "
              f"in the run, {mech.content_hash[:12]} now); no conditioning is drawn.")
         return None
-    try:
-        reference = reference_trajectory(mech)
-    except ReferenceError as error:
-        omit(f"{name}: no verified reference ({' '.join(str(error).split())}); no conditioning "
-             f"is drawn.")
+    reference = stored_reference(mech)
+    if reference is None:
+        omit(f"{name}: no verified reference is stored for it (``mbh reference {name}`` builds "
+             f"one); no conditioning is drawn.")
         return None
     return conditioning(mech, reference, float(frame["t_end"].max()) if len(frame) else None)
 
@@ -455,7 +455,7 @@ def section_scenes(cases: pd.DataFrame, sweeps: pd.DataFrame, accuracy: float, m
     Parameters
     ----------
     cases, sweeps : DataFrame
-        The run's case and sweep rows (:meth:`harness.store.RunStore.cases`, ``sweeps``).
+        The run's case and sweep rows (:meth:`harness.store.runs.RunStore.cases`, ``sweeps``).
     accuracy : float
         The campaign's threshold on the main output, rad or m.
     manifest : dict

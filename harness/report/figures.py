@@ -17,17 +17,17 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from harness.energy import energy_balance, energy_scale
-from harness.joint_equations import JointEquations
-from harness.metrics import lever_length, violation_series
-from harness.model import Mechanism
-from harness.outputs import output_series
-from harness.rank import independent_rows
+from harness.measure.energy import energy_balance, energy_scale
+from harness.neutral.equations import JointEquations
+from harness.measure.metrics import lever_length, violation_series
+from harness.model.mechanism import Mechanism
+from harness.model.outputs import output_series
+from harness.neutral.mobility import independent_rows
 from harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
                                   apply_style, is_missing, new_figure, no_data, outcome, plain,
                                   render, series_style)
-from harness.sampling import reference_indices
-from harness.trajectory import Trajectory
+from harness.model.timegrid import reference_indices
+from harness.model.trajectory import Trajectory
 
 #: The y quantities of a work-precision diagram → axis label.
 Y_LABELS = {
@@ -38,7 +38,7 @@ Y_LABELS = {
 #: Marker of a point drawn off the chart, by its label (a status, or why an ok case has no place).
 EDGE_MARKERS = {"diverged": "X", "failed": "v", "crashed": "*", "timeout": "P",
                 "unsupported": "s", "no value": "o", "no time": "d", "zero": "^"}
-#: Unit of each output kind (harness.model.Output).
+#: Unit of each output kind (harness.model.mechanism.Output).
 OUTPUT_UNITS = {"joint_angle": "rad", "joint_rate": "rad/s", "joint_position": "m",
                 "position": "m", "velocity": "m/s", "point_position": "m",
                 "point_velocity": "m/s"}
@@ -380,7 +380,7 @@ def _mark_sweeps(axes, sweep: pd.DataFrame, rows: list, columns: list) -> dict:
 def jacobian_condition(mech: Mechanism, trajectory: Trajectory) -> np.ndarray:
     """Condition number of [independent joint rows; driver row] at every sample, shape (n,).
 
-    The measure of :func:`harness.rank.rank_analysis` (σ_max/σ_min of that system, σ_min the
+    The measure of :func:`harness.neutral.mobility.rank_analysis` (σ_max/σ_min of that system, σ_min the
     min(rows, columns)-th singular value; ∞ where it is zero), with the independent rows chosen
     once, at the first sample (the start's rank), so that a rank lost later shows as a condition
     growing without bound rather than as a change of rows.
@@ -412,8 +412,8 @@ def time_history(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
 
     Panels: each output (the case in colour over the reference in grey); the output errors
     |y − y_ref| (log); the constraint violation (joint gap and orientation residual × lever
-    length ℓ, :func:`harness.metrics.violation_series`, m, log); the energy-balance error
-    (:func:`harness.energy.energy_balance`, relative to the reference's energy scale, or in J
+    length ℓ, :func:`harness.measure.metrics.violation_series`, m, log); the energy-balance error
+    (:func:`harness.measure.energy.energy_balance`, relative to the reference's energy scale, or in J
     without one; log); the condition number of the reference's constraint Jacobian
     (:func:`jacobian_condition`; the case's own without a reference; log).  A run that did not
     end ok has its failure time marked on every panel.

@@ -1,7 +1,7 @@
 """The seed's published figures (Rouvinen 2003, ch. 7, tables 9–11) next to our re-run of its setup.
 
 Published figures: ``harness/data/rouvinen2003_results.toml`` (transcribed with its citation).
-Ours: the rows of ``mbh seed-table --json`` (:func:`harness.seedtable.seed_rows`), stored beside a
+Ours: the rows of ``mbh seed-table --json`` (:func:`harness.jobs.seedtable.seed_rows`), stored beside a
 run as ``<run folder>/seed_table.json`` by ``make report``; the report never re-runs them.
 
 Nothing here is tuned to match: a row shows theirs, ours and ours / theirs, and :data:`NOTES`
@@ -44,7 +44,7 @@ NOTES = (
     "the same measure for every engine. The two are not the same quantity, so ratios of order "
     "one, not equality, are what agreement can mean here.",
     "Energy balance: both are the largest |T + V − W| over the run, in J (ours from body states "
-    "sampled every 0.01 s, harness/energy.py, relative to the start). With the deliberately "
+    "sampled every 0.01 s, harness/measure/energy.py, relative to the start). With the deliberately "
     "large step of the seed's setup this figure is dominated by the integration error, so it "
     "is sensitive to every detail of the two implementations.",
     "Integrators: the seed's Gear is a 4th-order predictor-corrector with iteration tolerance "

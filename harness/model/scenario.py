@@ -1,0 +1,923 @@
+"""Loading and validating scenario files (TOML, one mechanism per file in ``scenarios/``).
+
+The validator walks the whole file, collects every problem with its field path and raises one
+:class:`ScenarioError` listing them all (the sympy.physics.mechanics style), so a user fixes a file
+in one pass.  Nothing here raises anything else for bad input.
+
+File format (all SI; angles in degrees only where the key says ``_deg``)::
+
+    kind = "planar"               # or "spatial"
+    plane = "xy"                  # planar only
+    duration = 4.0                # s
+    sample_step = 0.01            # optional, s: the evaluation grid's spacing (default 0.01), a
+                                  # multiple of the reference grid's 1 ms (harness/model/timegrid.py)
+    gravity = [0.0, -9.81, 0.0]   # m/s², world
+    tags = ["seed"]
+    notes = "free text: sources, typos found in them"
+
+    [[bodies]]                    # centre-of-mass frame, reference configuration
+    name = "crank"
+    mass = 78.1
+    inertia = [Ixx, Iyy, Izz]     # or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], kg·m², body frame;
+                                  # slender bar: [1/12, 0, 1/12] (see "Inertia" below)
+    position = [x, y, z]
+    angle_deg = 60.0              # planar; spatial: euler313_deg = [ψ, θ, φ] or quaternion = [w, x, y, z]
+
+    [[joints]]
+    name = "O"
+    type = "revolute"             # revolute prismatic spherical universal cylindrical translational
+    body1 = "ground"
+    body2 = "crank"
+    location = [0, 0, 0]          # world, reference configuration
+    location2 = [...]             # optional: body2's point when the drawing is not assembled
+    axis = [0, 0, 1]              # world; universal: body1's cross axis
+    axis2 = [...]                 # universal: body2's cross axis
+    normal = [...]                # optional: perpendicular giving the zero of the joint angle
+
+    [[forces]]
+    type = "joint_torque"         # joint_torque joint_force body_force body_torque spring_damper
+    joint = "O"
+    value = -1200.0
+
+    [initial]
+    driver = "O"                  # a revolute, cylindrical, prismatic or translational joint
+    value = 0.0                   # rad or m from the reference configuration
+    rate = 0.0                    # rad/s or m/s
+    guess = { coupler = [x, y, z] }   # optional Newton start: picks the assembly branch
+
+    [[initial.velocities]]        # optional, any number: further velocities prescribed at t = 0
+    joint = "B"                   # a joint coordinate rate (drivable joint types, not the driver)
+    rate = 0.5                    # rad/s or m/s
+
+    [[initial.velocities]]
+    body = "crank"                # a body point's world velocity
+    location = [0.0, 1.0, 0.0]    # world, reference configuration (like joint locations)
+    velocity = [1.0, 0.0, 0.0]    # m/s, world
+    components = ["x"]            # optional, default all three (planar: x and y); the others
+                                  # are left to the constraints
+
+    [reference]                   # optional: what the reference routes may assume
+    equal_joint_angles = [["O1", "O2"], ["O1", "O3"]]   # joints that turn by equal angles on the
+                                  # assembly branch the motion stays on (harness/references/routes.py)
+    routes = "neutral"            # optional: the neutral DOP853 routes of harness/references/routes.py
+                                  # (implied by equal_joint_angles), not the in-house RK4/RKN4 ones
+
+    [outputs]
+    crank_angle = { kind = "joint_angle", joint = "O" }
+    beta = { kind = "joint_angle", joint = "O", offset = -0.0617 }   # rad added: an absolute angle
+    slider_x = { kind = "position", body = "slider", component = "x" }
+    tip_x = { kind = "point_position", body = "crank", location = [0.0, 1.0, 0.0], component = "x" }
+    tip_vy = { kind = "point_velocity", body = "crank", location = [0.0, 1.0, 0.0],
+               component = "y" }
+
+Outputs: ``joint_angle``, ``joint_rate`` (rad, rad/s) and ``joint_position`` (m) name a joint;
+a ``joint_angle`` may add a constant ``offset`` (rad, default 0), e.g. the angle's value in the
+reference configuration, so that the output is a publication's absolute angle;
+``position`` and ``velocity`` name a moving body (not ground) and a component of its centre of
+mass; ``point_position`` and ``point_velocity`` also take ``location``, a world point in the
+reference configuration that the loader converts to the body frame (p̄ = Aᵀ(location − r)), and
+report ``r + A p̄`` or ``v + ω × A p̄``.  ``component`` defaults to ``"x"``.
+
+Inertia: the tensor must be symmetric positive definite and satisfy the triangle inequality
+(each principal moment at most the sum of the other two), or describe a slender bar: exactly one
+principal moment zero (about the bar's axis) and the other two equal and positive, i.e. the
+triangle inequality holding with equality.  Zero means below 1e-12 of the trace.  Negative
+moments, two zero moments and a violated triangle inequality are rejected.  How each engine treats
+a zero moment is the adapter's business and is stated in its case notes.
+
+Prescribed velocities: ``initial.rate`` and every ``[[initial.velocities]]`` entry are velocity
+conditions at t = 0; with the constraints they must determine one consistent state.  The assembly
+checks them and refuses an inconsistent or insufficient start; the loader only checks that each
+names a known joint or body, a valid point and valid components.
+
+Limits: every number is finite (``nan`` and ``inf`` are rejected) and at most 1e100 in
+magnitude; masses and the duration are at least 1e-100.  The engines multiply up to three such
+numbers (m·v², I·ω², r × F), and 1e100³ stays inside the double range.  Names (of the scenario,
+bodies, joints, springs and outputs) are printable — no control or format characters such as a
+right-to-left override or a zero-width space — and not padded with whitespace; markup and emoji
+are fine.  In a planar scene every point (locations, prescribed velocities) lies in z = 0.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import tomllib
+import unicodedata
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from harness.model.mechanism import (
+    DRIVABLE,
+    GROUND,
+    JOINT_TYPES,
+    PLANAR_JOINT_TYPES,
+    Body,
+    BodyForce,
+    BodyTorque,
+    InitialState,
+    Joint,
+    JointActuation,
+    Mechanism,
+    Output,
+    Prescribed,
+    PrescribedJointRate,
+    PrescribedPointVelocity,
+    SpringDamper,
+)
+from harness.model.families import FamilyError, family_document, family_names
+from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
+
+SCENARIO_DIR = Path(__file__).resolve().parents[2] / "scenarios"
+
+_TOP_KEYS = {"name", "kind", "plane", "duration", "sample_step", "gravity", "tags", "notes", "bodies", "joints",
+             "forces", "initial", "outputs", "reference"}
+_BODY_KEYS = {"name", "mass", "inertia", "position", "angle_deg", "euler313_deg", "quaternion"}
+_JOINT_KEYS = {"name", "type", "body1", "body2", "location", "location2", "axis", "axis2", "normal"}
+_FORCE_KEYS = {
+    "joint_torque": {"type", "joint", "value"},
+    "joint_force": {"type", "joint", "value"},
+    "body_force": {"type", "body", "force", "point"},
+    "body_torque": {"type", "body", "torque"},
+    "spring_damper": {"type", "name", "body1", "body2", "location1", "location2", "stiffness",
+                      "damping", "free_length"},
+}
+_OUTPUT_KINDS = {"joint_angle": "joint", "joint_rate": "joint", "joint_position": "joint",
+                 "position": "body", "velocity": "body",
+                 "point_position": "point", "point_velocity": "point"}
+_OUTPUT_KEYS = {"joint": {"kind", "joint", "offset"}, "body": {"kind", "body", "component"},
+                "point": {"kind", "body", "location", "component"}}
+_INITIAL_KEYS = {"driver", "value", "rate", "guess", "velocities"}
+_JOINT_RATE_KEYS = {"joint", "rate"}
+_POINT_VELOCITY_KEYS = {"body", "location", "velocity", "components"}
+_COMPONENTS = {"x": 0, "y": 1, "z": 2}
+_AXIS_TOL = 1e-9
+#: Largest magnitude of any number in a file, and smallest mass or duration: the engines multiply
+#: up to three such numbers (m·v², I·ω², r × F), and 1e100³ stays below the double range (1.8e308).
+_LARGEST = 1e100
+_SMALLEST = 1e-100
+#: Relative size (of the trace) below which a principal moment counts as zero: a slender bar.
+_ZERO_MOMENT = 1e-12
+#: Unicode categories a name may not contain: control, format (e.g. right-to-left override,
+#: zero-width space), surrogate, private-use, unassigned, line and paragraph separators.
+_UNPRINTABLE = {"Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"}
+
+
+@dataclass(frozen=True)
+class Problem:
+    """One validation finding: ``file: field: message``."""
+
+    file: str
+    field: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"{self.file}: {self.field}: {self.message}"
+
+
+class ScenarioError(ValueError):
+    """Raised once per file with every :class:`Problem` found."""
+
+    def __init__(self, problems: list[Problem]):
+        self.problems = problems
+        super().__init__("\n".join(str(p) for p in problems))
+
+
+class _Collector:
+    """Typed field readers that record a problem instead of raising."""
+
+    def __init__(self, file: str):
+        self.file = file
+        self.problems: list[Problem] = []
+
+    def add(self, field: str, message: str) -> None:
+        self.problems.append(Problem(self.file, field, message))
+
+    def unknown_keys(self, table: dict, allowed: set[str], path: str) -> None:
+        for key in sorted(set(table) - allowed):
+            self.add(_join(path, _key_text(key)),
+                     f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+    def required(self, table: dict, key: str, path: str) -> Any:
+        if key not in table:
+            self.add(_join(path, key), "missing required field")
+            return None
+        return table[key]
+
+    def string(self, table: dict, key: str, path: str, default: str | None = None) -> str | None:
+        value = table.get(key, default) if default is not None else self.required(table, key, path)
+        if value is None:
+            return None
+        if not isinstance(value, str) or not value:
+            self.add(_join(path, key), f"expected a non-empty string, got {value!r}")
+            return None
+        return value
+
+    def name(self, table: dict, key: str, path: str, default: str | None = None) -> str | None:
+        """A non-empty string fit to name something (see :func:`name_problem`)."""
+        value = self.string(table, key, path, default)
+        problem = None if value is None else name_problem(value)
+        if problem:
+            self.add(_join(path, key), problem)
+            return None
+        return value
+
+    def number(self, table: dict, key: str, path: str, default: float | None = None,
+               positive: bool = False, nonnegative: bool = False) -> float | None:
+        value = table.get(key, default) if default is not None else self.required(table, key, path)
+        if value is None:
+            return None
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            self.add(_join(path, key), f"expected a finite number, got {value!r}")
+            return None
+        if abs(value) > _LARGEST:
+            self.add(_join(path, key), f"magnitude {value:g} exceeds the limit {_LARGEST:g}")
+            return None
+        if positive and value <= 0:
+            self.add(_join(path, key), f"must be > 0, got {value!r}")
+            return None
+        if positive and value < _SMALLEST:
+            self.add(_join(path, key), f"{value:g} is below the smallest allowed {_SMALLEST:g}")
+            return None
+        if nonnegative and value < 0:
+            self.add(_join(path, key), f"must be >= 0, got {value!r}")
+            return None
+        return float(value)
+
+    def vector(self, table: dict, key: str, path: str, length: tuple[int, ...] = (3,),
+               required: bool = True, nonzero: bool = False) -> np.ndarray | None:
+        if key not in table:
+            if required:
+                self.add(_join(path, key), "missing required field")
+            return None
+        value = table[key]
+        field = _join(path, key)
+        if (not isinstance(value, list) or len(value) not in length
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+            sizes = " or ".join(str(n) for n in length)
+            self.add(field, f"expected a list of {sizes} numbers, got {value!r}")
+            return None
+        array = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(array)):
+            self.add(field, f"contains a non-finite value: {value!r}")
+            return None
+        if np.abs(array).max() > _LARGEST:
+            self.add(field, f"a magnitude exceeds the limit {_LARGEST:g}: {value!r}")
+            return None
+        if nonzero and np.linalg.norm(array) < _AXIS_TOL:
+            self.add(field, "zero-length vector")
+            return None
+        return array
+
+
+def name_problem(name: str) -> str | None:
+    """Why ``name`` cannot name a scenario, body, joint, force or output, or None.
+
+    Names are printed in tables and messages, so they must be printable and not padded; markup,
+    emoji and other printable characters are fine (every output escapes them).
+    """
+    bad = next((ch for ch in name if unicodedata.category(ch) in _UNPRINTABLE), None)
+    if bad is not None:
+        return (f"name {name!r} contains the unprintable character U+{ord(bad):04X} "
+                f"({unicodedata.category(bad)}); names must be printable")
+    if name != name.strip():
+        return f"name {name!r} has leading or trailing whitespace"
+    return None
+
+
+def _missing(*values) -> bool:
+    """True if any value is None (arrays compare element-wise, so ``None in`` cannot be used)."""
+    return any(v is None for v in values)
+
+
+def _join(path: str, key: str) -> str:
+    return f"{path}.{key}" if path else key
+
+
+def _key_text(key: str) -> str:
+    """``key`` as TOML writes it: bare when it can be, else quoted, so that an empty, spaced or
+    unprintable key still shows in the problem's field (``""``, not an empty field)."""
+    bare = key.isascii() and key.replace("_", "").replace("-", "").isalnum()
+    return key if bare else json.dumps(key)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def _perpendicular(axis: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to ``axis`` (deterministic choice)."""
+    trial = np.eye(3)[int(np.argmin(np.abs(axis)))]
+    return _unit(trial - axis * (trial @ axis))
+
+
+def inertia_tensor(values: np.ndarray) -> np.ndarray:
+    """Inertia tensor from ``[Ixx, Iyy, Izz]`` or ``[Ixx, Iyy, Izz, Ixy, Ixz, Iyz]`` (kg·m²)."""
+    if len(values) == 3:
+        return np.diag(values)
+    ixx, iyy, izz, ixy, ixz, iyz = values
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]])
+
+
+def inertia_problem(tensor: np.ndarray) -> str | None:
+    """Why ``tensor`` is not a physical inertia tensor, or None.
+
+    Accepts a positive definite tensor obeying the triangle inequality, or a slender bar's: one
+    principal moment zero (below ``_ZERO_MOMENT`` of the trace), the other two equal (the triangle
+    inequality with equality).  See the module docstring.
+    """
+    principal = np.linalg.eigvalsh(tensor)
+    total = principal.sum()
+    zero = _ZERO_MOMENT * abs(total)
+    listed = f"(principal moments {principal.tolist()})"
+    if principal[0] < -zero:
+        return f"has a negative principal moment {listed}"
+    if principal[1] <= zero:
+        return (f"has {'three' if principal[2] <= zero else 'two'} zero principal moments {listed}; "
+                "only a slender bar, with one zero moment about its axis, may have any")
+    for moment in principal:
+        if moment > total - moment + _ZERO_MOMENT * total:
+            return ("breaks the triangle inequality: principal moment "
+                    f"{moment:g} exceeds the sum of the other two ({total - moment:g})")
+    return None
+
+
+def _hash(document: dict) -> str:
+    canonical = json.dumps(document, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(canonical.encode()).hexdigest()
+
+
+def scenario_path(name: str) -> Path:
+    """Path of the shipped scenario ``name`` (a file name without ``.toml``)."""
+    return SCENARIO_DIR / f"{name}.toml"
+
+
+def scenario_names() -> list[str]:
+    """Names of the shipped scenarios, sorted."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.toml"))
+
+
+def is_scenario_name(name: str) -> bool:
+    """Whether ``name`` names a shipped scenario or a member (``family@parameter``) of a known
+    generated family; the member's parameter is checked when it loads."""
+    family, at, _ = name.partition("@")
+    if not at:
+        return name in scenario_names()
+
+    return family in family_names()
+
+
+def load(name_or_path: str | Path) -> Mechanism:
+    """Load and validate a scenario by shipped name or by path.
+
+    Raises
+    ------
+    ScenarioError
+        With every problem found, each naming the file and the field.
+    """
+    path = Path(name_or_path)
+    if path.suffix != ".toml" and "@" in str(name_or_path):
+        return _load_family_member(str(name_or_path))
+    if path.suffix != ".toml":
+        path = scenario_path(str(name_or_path))
+    file = str(path)
+    try:
+        document = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        known = ", ".join(scenario_names())
+        raise ScenarioError([Problem(file, "-", f"no such scenario file (shipped: {known})")]) from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise ScenarioError([Problem(file, "-", f"not valid TOML: {error}")]) from None
+    return _Builder(file, path.stem, document).build()
+
+
+def _load_family_member(name: str) -> Mechanism:
+    """Member ``family@parameter`` of a generated family (:mod:`harness.model.families`), validated by
+    the same loader as a file."""
+
+    family, _, parameter = name.partition("@")
+    file = f"harness/model/families.py: {name}"
+    try:
+        document = family_document(family, parameter)
+    except FamilyError as error:
+        raise ScenarioError([Problem(file, "-", str(error))]) from None
+    return _Builder(file, name, document).build()
+
+
+class _Builder:
+    """Turns a parsed TOML document into a :class:`Mechanism`, collecting problems."""
+
+    def __init__(self, file: str, stem: str, document: dict):
+        self.c = _Collector(file)
+        self.stem = stem
+        self.doc = document
+        self.bodies: dict[str, Body] = {}
+        self.joints: dict[str, Joint] = {}
+
+    def build(self) -> Mechanism:
+        c, doc = self.c, self.doc
+        c.unknown_keys(doc, _TOP_KEYS, "")
+        name = c.name(doc, "name", "", default=self.stem)
+        kind = c.string(doc, "kind", "")
+        if kind is not None and kind not in ("planar", "spatial"):
+            c.add("kind", f"expected 'planar' or 'spatial', got {kind!r}")
+            kind = None
+        if kind == "planar":
+            plane = c.string(doc, "plane", "")
+            if plane is not None and plane != "xy":
+                c.add("plane", f"only the 'xy' plane is supported, got {plane!r}")
+        elif "plane" in doc:
+            c.add("plane", "only planar scenarios declare a plane")
+        self.planar = kind == "planar"
+        duration = c.number(doc, "duration", "", positive=True)
+        sample_step = self._sample_step(duration)
+        gravity = c.vector(doc, "gravity", "")
+        tags = doc.get("tags", [])
+        if not isinstance(tags, list) or not all(isinstance(t, str) for t in tags):
+            c.add("tags", f"expected a list of strings, got {tags!r}")
+            tags = []
+        notes = doc.get("notes", "")
+        if not isinstance(notes, str):
+            c.add("notes", "expected a string")
+            notes = ""
+
+        self._bodies()
+        self._joints()
+        forces = self._forces()
+        initial = self._initial()
+        outputs = self._outputs()
+        branch, neutral_routes = self._reference()
+        if c.problems:
+            raise ScenarioError(c.problems)
+        return Mechanism(
+            name=name, kind=kind, bodies=tuple(self.bodies.values()),
+            joints=tuple(self.joints.values()), forces=tuple(forces), gravity=gravity,
+            initial=initial, duration=duration, sample_step=sample_step, outputs=tuple(outputs),
+            tags=tuple(tags),
+            notes=notes, source=c.file, content_hash=_hash(doc), branch=branch,
+            neutral_routes=neutral_routes or bool(branch),
+        )
+
+    def _sample_step(self, duration: float | None) -> float | None:
+        """``sample_step`` (s): a multiple of the reference grid step, at most the duration."""
+        step = self.c.number(self.doc, "sample_step", "", default=EVALUATION_STEP, positive=True)
+        if step is None:
+            return None
+        count = round(step / GRID_STEP)
+        if count < 1 or abs(step - count * GRID_STEP) > STEP_MATCH * step:
+            self.c.add("sample_step", f"{step!r} s is not a multiple of the reference grid step "
+                       f"{GRID_STEP:g} s")
+            return None
+        if duration is not None and step > duration:
+            self.c.add("sample_step", f"{step!r} s is longer than the duration {duration!r} s")
+            return None
+        return count * GRID_STEP
+
+    # -- sections -------------------------------------------------------------------------
+    def _tables(self, key: str, required: bool) -> list[tuple[str, dict]]:
+        items = self.doc.get(key)
+        if items is None:
+            if required:
+                self.c.add(key, "missing required section")
+            return []
+        if not isinstance(items, list) or not all(isinstance(t, dict) for t in items):
+            self.c.add(key, f"expected an array of tables ([[{key}]])")
+            return []
+        if required and not items:
+            self.c.add(key, "must hold at least one entry")
+        return [(f"{key}[{i}]", table) for i, table in enumerate(items)]
+
+    def _unique_name(self, table: dict, path: str, seen: dict, reserved=()) -> str | None:
+        name = self.c.name(table, "name", path)
+        if name is None:
+            return None
+        if name in seen or name in reserved:
+            self.c.add(_join(path, "name"), f"duplicate name {name!r}")
+            return None
+        return name
+
+    def _bodies(self) -> None:
+        c = self.c
+        for path, table in self._tables("bodies", required=True):
+            c.unknown_keys(table, _BODY_KEYS, path)
+            name = self._unique_name(table, path, self.bodies, reserved=(GROUND,))
+            mass = c.number(table, "mass", path, positive=True)
+            inertia_values = c.vector(table, "inertia", path, length=(3, 6))
+            inertia = None
+            if inertia_values is not None:
+                inertia = inertia_tensor(inertia_values)
+                problem = inertia_problem(inertia)
+                if problem:
+                    c.add(_join(path, "inertia"), problem)
+                    inertia = None
+            position = c.vector(table, "position", path)
+            rotation = self._orientation(table, path)
+            if self.planar and position is not None and position[2] != 0.0:
+                c.add(_join(path, "position"), "a planar body must lie in z = 0")
+            if not _missing(name, mass, inertia, position, rotation):
+                self.bodies[name] = Body(name, mass, inertia, position, rotation)
+            elif name is not None:
+                self.bodies[name] = None  # known name, invalid body: keeps references quiet
+
+    def _orientation(self, table: dict, path: str) -> np.ndarray | None:
+        c = self.c
+        given = [k for k in ("angle_deg", "euler313_deg", "quaternion") if k in table]
+        if len(given) > 1:
+            c.add(path, f"give one orientation, not {', '.join(given)}")
+            return None
+        if self.planar:
+            if given and given[0] != "angle_deg":
+                c.add(_join(path, given[0]), "a planar body takes angle_deg")
+                return None
+            angle = c.number(table, "angle_deg", path, default=0.0)
+            return None if angle is None else Rotation.from_euler("z", angle, degrees=True).as_matrix()
+        if not given:
+            return np.eye(3)
+        if given[0] == "euler313_deg":
+            angles = c.vector(table, "euler313_deg", path)
+            return None if angles is None else Rotation.from_euler("ZXZ", angles, degrees=True).as_matrix()
+        if given[0] == "quaternion":
+            quat = c.vector(table, "quaternion", path, length=(4,), nonzero=True)
+            return None if quat is None else Rotation.from_quat(quat, scalar_first=True).as_matrix()
+        c.add(_join(path, "angle_deg"), "a spatial body takes euler313_deg or quaternion")
+        return None
+
+    def _body_ref(self, table: dict, key: str, path: str) -> str | None:
+        name = self.c.string(table, key, path)
+        if name is None or name == GROUND:
+            return name
+        if name not in self.bodies:
+            known = ", ".join([GROUND, *self.bodies])
+            self.c.add(_join(path, key), f"unknown body {name!r} (known: {known})")
+            return None
+        return name
+
+    def _local_point(self, body: str, world: np.ndarray) -> np.ndarray:
+        if body == GROUND:
+            return world.copy()
+        b = self.bodies[body]
+        return b.rotation.T @ (world - b.position)
+
+    def _local_direction(self, body: str, world: np.ndarray) -> np.ndarray:
+        return world.copy() if body == GROUND else self.bodies[body].rotation.T @ world
+
+    def _joints(self) -> None:
+        c = self.c
+        for path, table in self._tables("joints", required=True):
+            c.unknown_keys(table, _JOINT_KEYS, path)
+            name = self._unique_name(table, path, self.joints)
+            jtype = c.string(table, "type", path)
+            allowed = PLANAR_JOINT_TYPES if self.planar else JOINT_TYPES
+            if jtype is not None and jtype not in allowed:
+                kind = "planar" if self.planar else "spatial"
+                c.add(_join(path, "type"), f"unknown {kind} joint type {jtype!r} "
+                      f"(known: {', '.join(allowed)})")
+                jtype = None
+            body1 = self._body_ref(table, "body1", path)
+            body2 = self._body_ref(table, "body2", path)
+            if body1 is not None and body1 == body2:
+                c.add(_join(path, "body2"), f"a joint needs two different bodies, got {body1!r} twice")
+                body2 = None
+            location = c.vector(table, "location", path)
+            location2 = c.vector(table, "location2", path, required=False)
+            needs_axis = jtype not in (None, "spherical") and not (self.planar and jtype == "revolute")
+            axis = c.vector(table, "axis", path, required=needs_axis, nonzero=True)
+            axis2 = c.vector(table, "axis2", path, required=jtype == "universal", nonzero=True)
+            normal = c.vector(table, "normal", path, required=False, nonzero=True)
+            if self.planar:
+                axis = self._planar_axis(jtype, axis, path)
+                for key, point in (("location", location), ("location2", location2)):
+                    if point is not None and point[2] != 0.0:
+                        c.add(_join(path, key), "a planar joint must lie in z = 0")
+            if jtype == "spherical" and axis is None:
+                axis = np.array([0.0, 0.0, 1.0])
+            if jtype == "universal" and axis is not None and axis2 is not None:
+                if abs(_unit(axis) @ _unit(axis2)) > 1e-9:
+                    c.add(_join(path, "axis2"), "the universal joint's cross axes must be perpendicular")
+                    axis2 = None
+            if normal is not None and axis is not None and abs(_unit(normal) @ _unit(axis)) > 1e-9:
+                c.add(_join(path, "normal"), "must be perpendicular to the axis")
+                normal = None
+            parts = (name, jtype, body1, body2, location, axis)
+            if _missing(*parts) or (jtype == "universal" and axis2 is None) \
+                    or self.bodies.get(body1, 0) is None or self.bodies.get(body2, 0) is None:
+                if name is not None:
+                    self.joints[name] = None
+                continue
+            self.joints[name] = self._joint(name, jtype, body1, body2, location, location2,
+                                            _unit(axis), None if axis2 is None else _unit(axis2),
+                                            None if normal is None else _unit(normal))
+
+    def _planar_axis(self, jtype, axis, path) -> np.ndarray | None:
+        z = np.array([0.0, 0.0, 1.0])
+        if jtype == "revolute":
+            if axis is not None and np.linalg.norm(np.cross(_unit(axis), z)) > 1e-9:
+                self.c.add(_join(path, "axis"), "a planar revolute joint turns about z")
+                return None
+            return z if axis is None else _unit(axis)
+        if axis is not None and abs(axis[2]) > 0:
+            self.c.add(_join(path, "axis"), "a planar prismatic axis must lie in the x–y plane")
+            return None
+        return axis
+
+    def _joint(self, name, jtype, body1, body2, location, location2, axis, axis2, normal) -> Joint:
+        point1 = self._local_point(body1, location)
+        point2 = self._local_point(body2, location if location2 is None else location2)
+        if jtype == "universal":
+            normal = np.cross(axis, axis2)
+            second = axis2
+        else:
+            second = axis
+            # A given normal passed the 1e-9 perpendicularity check; project it exactly, so the
+            # joint's frame is orthonormal to round-off (engines in joint coordinates need it).
+            normal = (_perpendicular(axis) if normal is None
+                      else _unit(normal - (normal @ axis) * axis))
+        return Joint(
+            name=name, type=jtype, body1=body1, body2=body2, point1=point1, point2=point2,
+            axis1=self._local_direction(body1, axis), axis2=self._local_direction(body2, second),
+            normal1=self._local_direction(body1, normal), normal2=self._local_direction(body2, normal),
+        )
+
+    def _forces(self) -> list:
+        c = self.c
+        forces = []
+        for path, table in self._tables("forces", required=False):
+            ftype = c.string(table, "type", path)
+            if ftype is None:
+                continue
+            if ftype not in _FORCE_KEYS:
+                c.add(_join(path, "type"), f"unknown force type {ftype!r} "
+                      f"(known: {', '.join(sorted(_FORCE_KEYS))})")
+                continue
+            c.unknown_keys(table, _FORCE_KEYS[ftype], path)
+            force = getattr(self, f"_force_{ftype}")(table, path)
+            if force is not None:
+                forces.append(force)
+        return forces
+
+    def _offset(self, spec: dict, kind: str, path: str) -> float | None:
+        """A joint output's ``offset`` (rad, default 0): only ``joint_angle`` takes one."""
+        if "offset" in spec and kind != "joint_angle":
+            self.c.add(_join(path, "offset"), f"only joint_angle outputs take an offset, not {kind}")
+            return None
+        return self.c.number(spec, "offset", path, default=0.0)
+
+    def _joint_ref(self, table: dict, path: str, types=()) -> str | None:
+        name = self.c.string(table, "joint", path)
+        if name is None:
+            return None
+        return self._known_joint(name, _join(path, "joint"), types,
+                                 f"; expected one of {', '.join(types)}")
+
+    def _known_joint(self, name: str, field: str, types=(), rule: str = "") -> str | None:
+        """``name`` if it is a declared joint whose type is among ``types`` (any when empty);
+        else None, with the problem recorded at ``field`` (``rule`` says what was expected)."""
+        if name not in self.joints:
+            self.c.add(field, f"unknown joint {name!r} (known: {', '.join(self.joints)})")
+            return None
+        joint = self.joints[name]
+        if types and joint is not None and joint.type not in types:
+            self.c.add(field, f"joint {name!r} is {joint.type}{rule}")
+            return None
+        return name
+
+    def _force_joint_torque(self, table, path):
+        joint = self._joint_ref(table, path, types=("revolute", "cylindrical"))
+        value = self.c.number(table, "value", path)
+        return None if _missing(joint, value) else JointActuation(joint, value)
+
+    def _force_joint_force(self, table, path):
+        joint = self._joint_ref(table, path, types=("prismatic", "translational", "cylindrical"))
+        value = self.c.number(table, "value", path)
+        return None if _missing(joint, value) else JointActuation(joint, value)
+
+    def _force_body_force(self, table, path):
+        body = self._body_ref(table, "body", path)
+        force = self.c.vector(table, "force", path)
+        point = self.c.vector(table, "point", path, required=False)
+        if _missing(body, force) or body == GROUND or self.bodies[body] is None:
+            return None
+        local = np.zeros(3) if point is None else self._local_point(body, point)
+        return BodyForce(body, force, local)
+
+    def _force_body_torque(self, table, path):
+        body = self._body_ref(table, "body", path)
+        torque = self.c.vector(table, "torque", path)
+        return None if _missing(body, torque) or body == GROUND else BodyTorque(body, torque)
+
+    def _force_spring_damper(self, table, path):
+        c = self.c
+        name = c.name(table, "name", path, default="spring")
+        body1 = self._body_ref(table, "body1", path)
+        body2 = self._body_ref(table, "body2", path)
+        loc1 = c.vector(table, "location1", path)
+        loc2 = c.vector(table, "location2", path)
+        k = c.number(table, "stiffness", path, nonnegative=True)
+        d = c.number(table, "damping", path, default=0.0, nonnegative=True)
+        length = c.number(table, "free_length", path, nonnegative=True)
+        if _missing(name, body1, body2, loc1, loc2, k, d, length) \
+                or self.bodies.get(body1, 0) is None or self.bodies.get(body2, 0) is None:
+            return None
+        return SpringDamper(name, body1, body2, self._local_point(body1, loc1),
+                            self._local_point(body2, loc2), k, d, length)
+
+    def _initial(self) -> InitialState | None:
+        c = self.c
+        table = self.doc.get("initial")
+        if not isinstance(table, dict):
+            c.add("initial", "missing required section [initial] with the driver")
+            return None
+        c.unknown_keys(table, _INITIAL_KEYS, "initial")
+        driver = self._drivable_joint(table, "driver", "initial")
+        value = c.number(table, "value", "initial", default=0.0)
+        rate = c.number(table, "rate", "initial", default=0.0)
+        guess = {}
+        raw_guess = table.get("guess", {})
+        if not isinstance(raw_guess, dict):
+            c.add("initial.guess", "expected a table of body = [x, y, z]")
+            raw_guess = {}
+        for body in raw_guess:
+            if body not in self.bodies:
+                c.add(f"initial.guess.{body}", f"unknown body {body!r}")
+                continue
+            point = c.vector(raw_guess, body, "initial.guess")
+            if point is not None:
+                guess[body] = point
+        prescribed = self._prescribed(table, driver)
+        if _missing(driver, value, rate, prescribed):
+            return None
+        return InitialState(driver, value, rate, guess, prescribed)
+
+    def _reference(self) -> tuple[tuple[tuple[str, str], ...], bool]:
+        """The ``[reference]`` table: pairs of revolute or cylindrical joints that turn by equal
+        angles on the motion's assembly branch, and whether the reference takes the neutral
+        routes (``routes = "neutral"``; the default ``"inhouse"``)."""
+        c = self.c
+        table = self.doc.get("reference", {})
+        if not isinstance(table, dict):
+            c.add("reference", "expected a table")
+            return (), False
+        c.unknown_keys(table, {"equal_joint_angles", "routes"}, "reference")
+        routes = table.get("routes", "inhouse")
+        if routes not in ("inhouse", "neutral"):
+            c.add("reference.routes", f"expected 'inhouse' or 'neutral', got {routes!r}")
+        pairs = table.get("equal_joint_angles", [])
+        field = "reference.equal_joint_angles"
+        if not isinstance(pairs, list):
+            c.add(field, f"expected a list of joint-name pairs, got {pairs!r}")
+            return (), False
+        branch = []
+        for index, pair in enumerate(pairs):
+            path = f"{field}[{index}]"
+            if not (isinstance(pair, list) and len(pair) == 2
+                    and all(isinstance(n, str) for n in pair)):
+                c.add(path, f"expected a pair of joint names, got {pair!r}")
+                continue
+            if pair[0] == pair[1]:
+                c.add(path, f"a joint paired with itself ({pair[0]!r})")
+                continue
+            known = [self._known_joint(name, path, ("revolute", "cylindrical"),
+                                       ", which has no angle") for name in pair]
+            if all(known):
+                branch.append((pair[0], pair[1]))
+        return tuple(branch), routes == "neutral"
+
+    def _drivable_joint(self, table: dict, key: str, path: str) -> str | None:
+        """The joint named by ``table[key]`` if it exists and has a single coordinate."""
+        name = self.c.string(table, key, path)
+        if name is None:
+            return None
+        return self._known_joint(name, _join(path, key), DRIVABLE,
+                                 ", which has no single coordinate; drivable types: "
+                                 f"{', '.join(DRIVABLE)}")
+
+    def _prescribed(self, table: dict, driver: str | None) -> tuple[Prescribed, ...] | None:
+        """The ``[[initial.velocities]]`` entries, or None if any is invalid."""
+        entries = table.get("velocities", [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            self.c.add("initial.velocities", "expected an array of tables ([[initial.velocities]])")
+            return None
+        prescribed, valid, seen_joints = [], True, set()
+        for index, entry in enumerate(entries):
+            path = f"initial.velocities[{index}]"
+            if ("joint" in entry) == ("body" in entry):
+                self.c.add(path, "give either joint (with rate) or body (with location and "
+                           "velocity)")
+                valid = False
+                continue
+            if "joint" in entry:
+                item = self._prescribed_rate(entry, path, driver, seen_joints)
+            else:
+                item = self._prescribed_point(entry, path)
+            valid = valid and item is not None
+            prescribed.append(item)
+        return tuple(prescribed) if valid else None
+
+    def _prescribed_rate(self, entry: dict, path: str, driver: str | None,
+                         seen: set[str]) -> PrescribedJointRate | None:
+        self.c.unknown_keys(entry, _JOINT_RATE_KEYS, path)
+        joint = self._drivable_joint(entry, "joint", path)
+        rate = self.c.number(entry, "rate", path)
+        if joint is not None and joint == driver:
+            self.c.add(_join(path, "joint"), f"joint {joint!r} is the driver; its rate is "
+                       "initial.rate")
+            return None
+        if joint is not None and joint in seen:
+            self.c.add(_join(path, "joint"), f"joint {joint!r} is prescribed twice")
+            return None
+        if joint is not None:
+            seen.add(joint)
+        return None if _missing(joint, rate) else PrescribedJointRate(joint, rate)
+
+    def _prescribed_point(self, entry: dict, path: str) -> PrescribedPointVelocity | None:
+        c = self.c
+        c.unknown_keys(entry, _POINT_VELOCITY_KEYS, path)
+        body = self._moving_body(entry, path)
+        location = self._planar_point(entry, "location", path)
+        velocity = self._planar_point(entry, "velocity", path)
+        components = self._components(entry, path)
+        if _missing(body, location, velocity, components):
+            return None
+        return PrescribedPointVelocity(body, self._local_point(body, location), velocity,
+                                       components)
+
+    def _moving_body(self, table: dict, path: str) -> str | None:
+        """A known, valid, non-ground body named by ``table["body"]``."""
+        body = self._body_ref(table, "body", path)
+        if body == GROUND:
+            self.c.add(_join(path, "body"), "ground does not move; name a body")
+            return None
+        if body is None or self.bodies[body] is None:
+            return None
+        return body
+
+    def _planar_point(self, table: dict, key: str, path: str) -> np.ndarray | None:
+        """A 3-vector; in a planar scene its z component must be 0."""
+        point = self.c.vector(table, key, path)
+        if self.planar and point is not None and point[2] != 0.0:
+            self.c.add(_join(path, key), "a planar scene lies in z = 0")
+            return None
+        return point
+
+    def _components(self, entry: dict, path: str) -> tuple[int, ...] | None:
+        letters = ("x", "y") if self.planar else ("x", "y", "z")
+        raw = entry.get("components", list(letters))
+        field = _join(path, "components")
+        if (not isinstance(raw, list) or not raw
+                or not all(isinstance(letter, str) and letter in letters for letter in raw)
+                or len(set(raw)) != len(raw)):
+            self.c.add(field, f"expected a non-empty list of distinct components from "
+                       f"{', '.join(letters)}, got {raw!r}")
+            return None
+        return tuple(_COMPONENTS[letter] for letter in raw)
+
+    def _outputs(self) -> list[Output]:
+        c = self.c
+        table = self.doc.get("outputs", {})
+        if not isinstance(table, dict):
+            c.add("outputs", "expected a table of name = { kind = ..., ... }")
+            return []
+        outputs = []
+        for name, spec in table.items():
+            path = f"outputs.{name}"
+            problem = name_problem(name)
+            if problem:
+                c.add(f"outputs[{name!r}]", problem)
+                continue
+            if not isinstance(spec, dict):
+                c.add(path, "expected an inline table { kind = ..., ... }")
+                continue
+            kind = c.string(spec, "kind", path)
+            if kind is None:
+                continue
+            if kind not in _OUTPUT_KINDS:
+                c.add(_join(path, "kind"), f"unknown output kind {kind!r} "
+                      f"(known: {', '.join(_OUTPUT_KINDS)})")
+                continue
+            ref = _OUTPUT_KINDS[kind]
+            c.unknown_keys(spec, _OUTPUT_KEYS[ref], path)
+            if ref == "joint":
+                target = self._joint_ref(spec, path)
+                offset = self._offset(spec, kind, path)
+                if target is not None and offset is not None:
+                    outputs.append(Output(name, kind, target, offset=offset))
+                continue
+            target = self._moving_body(spec, path)
+            letter = c.string(spec, "component", path, default="x")
+            component = _COMPONENTS.get(letter)
+            if letter is not None and component is None:
+                c.add(_join(path, "component"), f"expected x, y or z, got {letter!r}")
+            point = None
+            if ref == "point":
+                location = self._planar_point(spec, "location", path)
+                if location is None or target is None:
+                    continue
+                point = self._local_point(target, location)
+            if target is not None and component is not None:
+                outputs.append(Output(name, kind, target, component, point))
+        return outputs

@@ -1,0 +1,9 @@
+"""The harness's own kinematics and dynamics, written independently of every contestant:
+the joint equations on body states (``equations``, compiled in ``equation_kernels``), assembly by
+Newton–Raphson (``assembly``), rank, mobility and redundant equations (``mobility``), the
+conditioning of Φ_q along a motion (``conditioning``), the one start every engine shares
+(``start``) and the neutral equations of motion the branch routes integrate (``dynamics``,
+compiled in ``dynamics_kernels``).
+
+May import: :mod:`harness.common`, :mod:`harness.model`.
+"""

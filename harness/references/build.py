@@ -1,0 +1,233 @@
+"""Verified reference solutions, cached on disk by scenario content hash.
+
+A reference is the in-house formulation's most accurate configuration, computed by two routes on
+the same dense time grid, both the index-1 augmented form with direct position and velocity
+projection after every step (002 eq. 77, 127, 137) at Δt = 5e-5 s, integrated by two different
+method families:
+
+* route A (:data:`ROUTE_A`): the classical Runge–Kutta RK4 on the first-order system;
+* route B (:data:`ROUTE_B`): the Runge–Kutta–Nyström RKN4 on the second-order system.
+
+Their largest difference over the whole run — every position-level output and every body's centre
+of mass, in rad and m — is stored with the reference and must not exceed :data:`AGREEMENT_LIMIT`.
+Route A's trajectory is the reference.  The formulation itself is checked independently elsewhere:
+the planar and spatial four-bar models agree (tests), the engines in joint coordinates agree
+(Pinocchio to ~4e-11 rad), and a third, informational route stored here runs SUNDIALS IDA on the
+stabilised index-2 DAE (:data:`DAE_CHECK`).  IDA's corrector fails below rtol ≈ 1e-13, which leaves
+it ~6e-10 from route A on the four-bar and ~1e-7 on the fast-spinning slider-cranks, so it is
+reported, not required.  Rejected as routes (measured on the 8 s spatial slider-crank, crank turning
+42 rad): adaptive DOP853 on the partitioned form at rtol 3e-14 (1.7e-9 off) and fixed-step
+partitioning with its split switched late (RK4 or RKN4 at 5e-5: 8e-8 and 6e-9 off; the reduced
+ODE steepens near a fold of the independent coordinate, see the in-house ``partition`` method,
+whose default now switches at a 1 % conditioning advantage).
+
+A scene that passes singular positions and declares the branch it stays on (``[reference]
+equal_joint_angles``, e.g. ``double_fourbar``), or that asks for them (``[reference] routes =
+"neutral"``: fast or stiff scenes where a fixed 5e-5 s step cannot reach the limit), uses two
+other routes, :data:`BRANCH_ROUTE_A` (every
+body, index-1 Newton–Euler with the branch's rows) and :data:`BRANCH_ROUTE_B` (the driver
+coordinate alone, reduced along the branch), both DOP853 on the harness's neutral joint equations: the
+RK4/RKN4 routes lose the branch's accuracy at every passage (they disagree by 1.2e-4 m on
+``double_fourbar``), see :mod:`harness.references.routes`.  Either way route A must also satisfy the
+plain joint equations within the agreement limit.
+
+Shipped references live in ``scenarios/references`` (``MBH_CACHE_DIR`` overrides it); a file is
+keyed by the scenario's content hash and :data:`REFERENCE_VERSION`, so editing a scenario, or
+bumping the version when the formulation changes, rebuilds it.  On load the stored metadata must
+match the scenario and the builder (name, content hash, version, grid step, routes, agreement
+within the limit, arrays on the grid), or the reference is rebuilt; files are written atomically
+(unique temporary file, ``os.replace``), so processes of a pool can share the cache.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from harness.references.routes import ROUTE_TOLERANCE, BranchRouteError, full_route, reduced_route
+from harness.model.mechanism import Mechanism
+from harness.model.outputs import output_series
+from harness.model.timegrid import GRID_STEP
+from harness.model.trajectory import Trajectory
+from harness.common.errors import MbhError
+from harness.store.reference_files import (AGREEMENT_LIMIT, REFERENCE_VERSION, cache_dir,
+                                           read_reference, reference_grid, refusal_path,
+                                           replace_atomically, write_reference)
+from harness.measure.metrics import constraint_violations
+
+#: (method, step) of each route; IDA's step is only its first-step hint.
+ROUTE_A = ("rk4+direct:proj_tol=1e-14", 5e-5)
+ROUTE_B = ("rkn4+direct:proj_tol=1e-14", 5e-5)
+DAE_CHECK = ("ida:rtol=1e-13,atol=1e-13,max_steps=5000000", GRID_STEP)
+#: The routes of a scene that declares the branch it stays on (``[reference]
+#: equal_joint_angles``): (route, DOP853 tolerance), see :mod:`harness.references.routes`.
+#: The full route is route A (the reference): on double_fourbar it is 1.9e-11 m from the
+#: one-degree-of-freedom model over 10 s, the reduced route 4.7e-10 m (its θ̈ carries the
+#: finite-difference noise of γ, ≈ 2e-13 relative, times θ̇² up to 46 rad²/s²).
+BRANCH_ROUTE_A = ("branch-full:dop853", ROUTE_TOLERANCE)
+BRANCH_ROUTE_B = ("branch-reduced:dop853", ROUTE_TOLERANCE)
+_BRANCH_ROUTES = {BRANCH_ROUTE_A[0]: full_route, BRANCH_ROUTE_B[0]: reduced_route}
+
+
+class ReferenceBuildError(MbhError, RuntimeError):
+    """The two routes did not agree, or a route failed; the message has the numbers."""
+
+
+_POSITION_LEVEL = ("joint_angle", "joint_position", "position", "point_position")
+
+
+def route_difference(mech: Mechanism, a: Trajectory, b: Trajectory) -> dict:
+    """Largest differences between two trajectories on the same grid.
+
+    ``max`` covers the position-level quantities the agreement limit applies to (outputs in rad
+    or m and every body's centre of mass, m); velocity-level outputs (rad/s, m/s) are reported
+    under ``velocity_outputs`` for information.
+    """
+    def difference(name):
+        return float(np.abs(output_series(mech, a, name) - output_series(mech, b, name)).max())
+
+    position = {o.name: difference(o.name) for o in mech.outputs if o.kind in _POSITION_LEVEL}
+    velocity = {o.name: difference(o.name) for o in mech.outputs if o.kind not in _POSITION_LEVEL}
+    bodies = float(np.abs(a.position - b.position).max())
+    return {"outputs": position, "velocity_outputs": velocity, "body_position_m": bodies,
+            "max": max([*position.values(), bodies])}
+
+
+def routes(mech: Mechanism) -> tuple[tuple[str, float], tuple[str, float]]:
+    """Routes A and B of ``mech``: the neutral (branch) routes for a scene that declares its
+    branch or asks for them (``[reference] routes = "neutral"``), the in-house RK4/RKN4 routes
+    otherwise."""
+    return (BRANCH_ROUTE_A, BRANCH_ROUTE_B) if mech.neutral_routes else (ROUTE_A, ROUTE_B)
+
+
+def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray) -> Trajectory:
+    from adapters import get_adapter
+
+    method, step = route
+    if method in _BRANCH_ROUTES:
+        try:
+            return _BRANCH_ROUTES[method](mech, grid)
+        except BranchRouteError as error:
+            raise ReferenceBuildError(f"{mech.name}: reference route {method}: {error}") from error
+    trajectory = get_adapter("inhouse").simulate(mech, method, step, mech.duration, grid)
+    if trajectory.status != "ok" or trajectory.n_samples != grid.size:
+        raise ReferenceBuildError(f"{mech.name}: reference route {method} (dt {step:g}) ended "
+                             f"{trajectory.status} at t = {trajectory.failure_time}: "
+                             f"{trajectory.reason}")
+    return trajectory
+
+
+def _cost(trajectory: Trajectory) -> dict:
+    return {"wall_time_s": trajectory.wall_time_s, "steps": trajectory.steps, **trajectory.counters}
+
+
+def _dae_check(mech: Mechanism, route_a: Trajectory, grid: np.ndarray) -> dict:
+    """Difference between IDA and route A, or why IDA did not finish (informational)."""
+    try:
+        dae = _run_route(mech, DAE_CHECK, grid)
+    except ReferenceBuildError as error:
+        return {"method": DAE_CHECK[0], "status": "failed", "reason": str(error)}
+    return {"method": DAE_CHECK[0], "status": "ok", "difference": route_difference(mech, route_a, dae),
+            "cost": _cost(dae)}
+
+
+def build_reference(mech: Mechanism) -> tuple[Trajectory, dict]:
+    """Compute both routes, their agreement and the DAE check (no cache); raises ReferenceBuildError
+    when the routes differ by more than :data:`AGREEMENT_LIMIT`."""
+    grid = reference_grid(mech)
+    first, second = routes(mech)
+    route_a = _run_route(mech, first, grid)
+    route_b = _run_route(mech, second, grid)
+    agreement = route_difference(mech, route_a, route_b)
+    if agreement["max"] > AGREEMENT_LIMIT:
+        raise ReferenceBuildError(f"{mech.name}: reference routes disagree by {agreement['max']:.3g} "
+                             f"> {AGREEMENT_LIMIT:g} ({json.dumps(agreement)})")
+
+    joints = constraint_violations(mech, route_a)["max_constraint_violation"]
+    if not joints <= AGREEMENT_LIMIT:
+        raise ReferenceBuildError(f"{mech.name}: route A violates the joint equations by {joints:.3g} "
+                             f"m > {AGREEMENT_LIMIT:g}")
+    info = {"scenario": mech.name, "content_hash": mech.content_hash,
+            "version": REFERENCE_VERSION, "route_a": list(first), "route_b": list(second),
+            "grid_step": GRID_STEP, "agreement": agreement, "max_constraint_violation": joints,
+            "route_a_cost": _cost(route_a), "route_b_cost": _cost(route_b),
+            "dae_check": (_dae_check(mech, route_a, grid) if not mech.branch else
+                          {"method": DAE_CHECK[0], "status": "skipped",
+                           "reason": "not run on a scene with singular passages (IDA failed at the "
+                                     "first one on double_fourbar, t = 0.71 s)"})}
+    return route_a, info
+
+
+def reference_trajectory(mech: Mechanism) -> Trajectory:
+    """The verified reference of ``mech``, from the cache or built (and cached) now."""
+    return load_or_build(mech)[0]
+
+
+def reference_info(mech: Mechanism) -> dict:
+    """The stored agreement and cost of ``mech``'s reference."""
+    return load_or_build(mech)[1]
+
+
+def load_or_build(mech: Mechanism) -> tuple[Trajectory, dict]:
+    """``mech``'s reference and its metadata, from the cache when the stored files pass
+    :func:`_stale_reason`, otherwise built and cached.
+
+    Safe for concurrent processes: each file is written to a unique temporary file in the cache
+    directory and moved into place with ``os.replace`` (atomic), data first and metadata last, so
+    a reader sees either no metadata or metadata whose data is complete.  Processes that build the
+    same reference at once write identical content; the last replace wins.  A refused build is
+    recorded next to it (``<stem>.refused.json``: the reason, keyed like a reference), so later
+    callers get the same ReferenceBuildError at once; delete the record to try again.
+
+    Raises
+    ------
+    ReferenceBuildError
+        When the routes fail or disagree (:func:`build_reference`), or the cache cannot be
+        written.
+    """
+    cached = read_reference(mech, routes(mech))
+    if cached is not None:
+        return cached
+    _raise_recorded_refusal(mech)
+    try:
+        trajectory, info = build_reference(mech)
+    except ReferenceBuildError as error:
+        _record_refusal(mech, error)
+        raise
+    try:
+        write_reference(mech, trajectory, info)
+    except OSError as error:
+        raise ReferenceBuildError(f"{mech.name}: cannot write the reference cache in "
+                                  f"{cache_dir()}: {error}") from error
+    return trajectory, info
+
+
+def _refusal_key(mech: Mechanism) -> dict:
+    """What a recorded refusal must match to stand for today's builder and scenario."""
+    return {"scenario": mech.name, "content_hash": mech.content_hash,
+            "version": REFERENCE_VERSION, "grid_step": GRID_STEP,
+            "route_a": list(routes(mech)[0]), "route_b": list(routes(mech)[1]),
+            "agreement_limit": AGREEMENT_LIMIT}
+
+
+def _record_refusal(mech: Mechanism, error: ReferenceBuildError) -> None:
+    """Keep why the build was refused, so that the next caller learns it at once instead of
+    spending minutes on the same routes (failure is data; delete the file to try again)."""
+    record = {**_refusal_key(mech), "refused": str(error)}
+    try:
+        replace_atomically(refusal_path(mech), lambda handle: handle.write(
+            json.dumps(record, indent=2).encode()))
+    except OSError:
+        pass  # an unwritable cache only costs the next caller a rebuild
+
+
+def _raise_recorded_refusal(mech: Mechanism) -> None:
+    """Raise the recorded ReferenceBuildError of a refused build that still applies, if any."""
+    try:
+        record = json.loads(refusal_path(mech).read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(record, dict) and all(record.get(k) == v for k, v in _refusal_key(mech).items()):
+        raise ReferenceBuildError(f"{record.get('refused')} (recorded by an earlier build in "
+                             f"{refusal_path(mech).name}; delete it to build again)")

@@ -1,0 +1,280 @@
+"""Run a campaign into the result store: references, calibration, cases, stability sweep.
+
+Stages of :func:`run_campaign`, in order:
+
+1. every scenario's verified reference is loaded (or built) here, before any case starts, so the
+   workers only read the cache; a refused reference (``ReferenceBuildError``) means that scenario's
+   cases run without one (their rows say ``reference = "none: <reason>"``);
+2. the run folder is created, or reopened with ``resume`` (its stored cases are skipped);
+3. the calibration case (:func:`harness.run.row.calibration_spec`) runs alone, and its wall time
+   is stored as the run's machine-speed figure (times of different runs compare as ratios to it);
+4. the cases run through :func:`harness.run.executor.execute` (one fresh process each) and are stored
+   as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.runs.CaseCache`
+   (same scenario content, engine version, method, step and duration, computed by the same code
+   under the same bounds and accuracy) is copied instead of run, and every run case is offered
+   to the cache;
+5. the optional stability sweep (:mod:`harness.run.sweep`) runs through the same executor;
+6. the run is marked ``complete``.
+
+Timing hygiene: the local pool never runs more cases at once than this process has cores
+(:func:`harness.run.executor.usable_cores`), and every worker has one BLAS/numba thread.  Ctrl-C marks
+the run ``interrupted`` (every finished case stays stored) and raises :class:`CampaignInterrupted`;
+``resume`` completes it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+from dataclasses import dataclass
+
+from harness.model import scenario
+from harness.common.environment import code_fingerprint
+from harness.run.executor import execute, usable_cores
+from harness.references.build import ReferenceBuildError, reference_trajectory
+from harness.store.runs import CaseCache, RunStore
+from harness.run.sweep import bisections, stability_sweep
+from harness.measure.verdict import Bounds
+
+
+#: How long to wait for a Dask scheduler to answer, s.
+SCHEDULER_CONNECT_S = 30.0
+
+
+class RunnerError(ValueError):
+    """A run that cannot start as asked (bad worker count, unknown or mismatched run to resume)."""
+
+
+class CampaignInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a run; ``store`` is the run, marked ``interrupted``."""
+
+    def __init__(self, store: RunStore):
+        super().__init__(f"run {store.run_id} interrupted")
+        self.store = store
+
+
+@dataclass(frozen=True)
+class CaseWork:
+    """The work a worker process does for one spec: :func:`harness.run.row.run_spec`.
+
+    Picklable (module-level class of plain fields), so it can be sent to worker processes.
+    """
+
+    bounds: Bounds
+    accuracy: float
+
+    def __call__(self, spec):
+        from harness.run.row import run_spec
+
+        outcome = run_spec(spec, self.bounds, self.accuracy)
+        return outcome.row, outcome.trajectory
+
+
+def timed_workers(requested: int | None, say=print) -> int:
+    """Worker count for timed cases: ``requested`` (default all cores), at most the cores."""
+    cores = usable_cores()
+    if requested is None:
+        return cores
+    if requested < 1:
+        raise RunnerError(f"--workers must be at least 1, got {requested}")
+    if requested > cores:
+        say(f"mbh: {requested} workers asked for, {cores} used: timed cases never run more "
+            f"at once than there are cores")
+        return cores
+    return requested
+
+
+def prepare_references(names, say=print) -> None:
+    """Load or build each scenario's verified reference in this process (into the reference
+    cache the workers read); a refused one is reported through ``say``."""
+    for name in sorted(set(names)):
+        try:
+            reference_trajectory(scenario.load(name))
+        except ReferenceBuildError as error:
+            say(f"mbh: {name}: no verified reference, its cases run without one ({error})")
+
+
+def check_scheduler(address: str) -> None:
+    """Connect to the Dask scheduler at ``address`` once, so a wrong address is an input error
+    before the run folder exists."""
+    from distributed import Client
+
+    try:
+        Client(address, timeout=SCHEDULER_CONNECT_S).close()
+    except (OSError, TimeoutError, ValueError) as error:
+        raise RunnerError(f"--scheduler {address}: cannot connect: {error}") from None
+
+
+def _open_store(campaign, resume: str | None, root) -> RunStore:
+    if resume is None:
+        return RunStore.create(campaign, root)
+    try:
+        store = RunStore.open(resume, root)
+    except FileNotFoundError as error:
+        raise RunnerError(f"--resume: {error}") from None
+    if store.manifest.get("campaign_text") != campaign.text:
+        raise RunnerError(f"--resume {resume}: the run was started from a different campaign "
+                         f"file than {campaign.path} (or the file changed since); resume it with "
+                         f"the same file")
+    store.mark_running()
+    return store
+
+
+class _Recorder:
+    """Stores each finished case (and offers it to the cache).
+
+    ``keys`` maps scenario names to content hashes and adapter names to versions; ``settings``
+    is the cache's last key part (:func:`_cache_settings`)."""
+
+    def __init__(self, store: RunStore, cache: CaseCache, keys: dict, settings: str):
+        self.store, self.cache, self.keys, self.settings = store, cache, keys, settings
+
+    def key(self, spec) -> tuple[str, str, str]:
+        """(scenario content hash, adapter version, settings) of ``spec``, the cache's key
+        parts."""
+        return self.keys[spec.scenario], self.keys[spec.adapter], self.settings
+
+    def record(self, spec, row: dict, trajectory) -> None:
+        self.store.add(row, trajectory)
+        self.cache.put(spec, *self.key(spec), row, trajectory, run_id=self.store.run_id)
+
+    def reuse(self, specs: list) -> list:
+        """Store the cached cases among ``specs``; return the ones still to run."""
+        remaining = []
+        for spec in specs:
+            found = self.cache.lookup(spec, *self.key(spec))
+            if found is None:
+                remaining.append(spec)
+            else:
+                row, trajectory = found
+                self.store.add({**row, "case_id": spec.case_id}, trajectory)
+        return remaining
+
+
+def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
+    from adapters import get_adapter
+
+    keys = {name: scenario.load(name).content_hash for name in names}
+    keys.update({name: get_adapter(name).version() for name in adapters})
+    return keys
+
+
+def _cache_settings(campaign) -> str:
+    """What a cached row depends on besides its case and engine: the harness's and adapters'
+    code (:func:`~harness.common.environment.code_fingerprint`), the verdict's bounds and the accuracy
+    the campaign judges ``accurate`` by; a row computed under other settings is not reused."""
+    return json.dumps({"code": code_fingerprint(), "bounds": dataclasses.asdict(campaign.bounds),
+                       "accuracy": campaign.accuracy}, sort_keys=True)
+
+
+def _calibrate(store: RunStore, work, scheduler, say) -> None:
+    """Run the calibration case alone and store its wall time (a failed one is reported)."""
+    from harness.run.row import calibration_spec
+
+    rows = []
+    execute([calibration_spec()], work, workers=1, scheduler=scheduler,
+            on_result=lambda spec, row, trajectory: rows.append(row), progress=False)
+    row = rows[0]
+    seconds = row.get("wall_time_s")
+    if row.get("status") == "ok" and seconds is not None and math.isfinite(seconds) and seconds > 0:
+        store.set_calibration(seconds)
+    else:
+        say(f"mbh: calibration case ended {row.get('status')} ({row.get('reason')}); this run "
+            f"has no machine-speed figure")
+
+
+def _sweep(campaign, store: RunStore, work, workers, scheduler, quiet: bool) -> None:
+    """Run the campaign's stability sweep (searches with a stored row are skipped)."""
+    from harness.run.spec import DEFAULT_TIMEOUT_S, CaseSpec
+
+    # One repetition (only the status and the error matter); the campaign's longest case limit.
+    timeout = max((spec.timeout_s for spec in campaign.cases), default=DEFAULT_TIMEOUT_S)
+
+    def make_spec(scenario_name, adapter, method, dt):
+        return CaseSpec(scenario_name, adapter, method, dt, campaign.sweep.t_end[scenario_name],
+                        1, timeout)
+
+    done = set(store.sweeps().get("sweep_id", []))
+    searches = [search for search in bisections(campaign.sweep)
+                if search.row()["sweep_id"] not in done]
+
+    def run(specs):
+        rows = {}
+        execute(specs, work, workers=workers, scheduler=scheduler, progress=not quiet,
+                on_result=lambda spec, row, trajectory: rows.__setitem__(spec.case_id, row))
+        return rows
+
+    stability_sweep(searches, make_spec, run, store.add_sweep)
+
+
+def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None = None,
+                 resume: str | None = None, reuse: bool = False, root=None, quiet: bool = False,
+                 work=None) -> RunStore:
+    """Run ``campaign`` (a :class:`harness.run.spec.Campaign`) into the result store.
+
+    Parameters
+    ----------
+    workers : int, optional
+        Local worker processes (default and maximum: the cores).
+    scheduler : str, optional
+        Dask scheduler address; the cases then run on that cluster.
+    resume : str, optional
+        Run id of an interrupted run of the same campaign file to complete.
+    reuse : bool
+        Copy identical cases from the cache instead of running them.
+    root : path, optional
+        Results root (default :func:`harness.store.runs.results_root`).
+    quiet : bool
+        No progress bar and no notes on stderr.
+    work : callable, optional
+        ``work(spec) -> (row, trajectory)`` run in the workers; default :class:`CaseWork` with
+        the campaign's bounds and accuracy.
+
+    Returns
+    -------
+    RunStore
+        The run, status ``complete``.
+
+    Raises
+    ------
+    CampaignInterrupted
+        On Ctrl-C, with the run marked ``interrupted``.
+    RunnerError
+        A bad worker count, an unreachable scheduler, an unknown run to resume, or a run of
+        another campaign file.
+    """
+    def say(text):
+        if not quiet:
+            print(text, file=sys.stderr)
+
+    work = work or CaseWork(campaign.bounds, campaign.accuracy)
+    if scheduler is None:
+        workers = timed_workers(workers, say)
+    else:
+        check_scheduler(scheduler)
+    names = {spec.scenario for spec in campaign.cases}
+    if campaign.sweep is not None:
+        names |= set(campaign.sweep.scenarios)
+    prepare_references(names, say)
+    store = _open_store(campaign, resume, root)
+    try:
+        if campaign.calibration and store.calibration_s is None:
+            _calibrate(store, work, scheduler, say)
+        done = store.done_case_ids()
+        todo = [spec for spec in campaign.cases if spec.case_id not in done]
+        recorder = _Recorder(store, CaseCache(root), _cache_keys(
+            {spec.scenario for spec in todo}, {spec.adapter for spec in todo}),
+            _cache_settings(campaign))
+        if reuse:
+            todo = recorder.reuse(todo)
+        execute(todo, work, workers=workers, scheduler=scheduler, on_result=recorder.record,
+                progress=not quiet)
+        if campaign.sweep is not None:
+            _sweep(campaign, store, work, workers, scheduler, quiet)
+    except KeyboardInterrupt:
+        store.finish("interrupted")
+        raise CampaignInterrupted(store) from None
+    store.finish("complete")
+    return store

@@ -1,0 +1,67 @@
+"""Run one case the one way every caller uses (``mbh simulate``, the seed table, campaigns):
+build → simulate (engine output captured) → the stick's verdict → metrics."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from adapters.base import Adapter, UnsupportedCase
+from harness.common.capture import captured_output, engine_note
+from harness.neutral.conditioning import label_failure
+from harness.measure.metrics import case_metrics
+from harness.model.mechanism import Mechanism
+from harness.model.timegrid import sample_times
+from harness.model.trajectory import Trajectory
+from harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
+
+
+@dataclass(frozen=True)
+class CaseResult:
+    """A judged run and its metrics row (:func:`harness.measure.metrics.case_metrics`)."""
+
+    trajectory: Trajectory
+    metrics: dict
+
+
+def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
+                  t_end: float) -> Trajectory:
+    """The adapter's own run, with what its library printed kept in the notes.
+
+    A mechanism the engine cannot build gives an ``unsupported`` trajectory.  Raises ValueError
+    for a step or end time that does not fit the sample grid or the adapter (user input).
+    """
+    times = sample_times(dt, t_end, mech.sample_step)
+    with captured_output() as printed:
+        try:
+            trajectory = adapter.simulate(adapter.build(mech), method, dt, t_end, times)
+        except UnsupportedCase as error:
+            trajectory = Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
+    note = engine_note(printed.text)
+    if note:
+        trajectory.notes = [*trajectory.notes, note]
+    return trajectory
+
+
+def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: float,
+             reference: Trajectory | None = None, bounds: Bounds = DEFAULT_BOUNDS) -> CaseResult:
+    """Simulate one case, judge it (:func:`harness.measure.verdict.judge`), say where it failed
+    (:func:`harness.neutral.conditioning.label_failure`: at a singular configuration, on an
+    overconstrained loop) and measure it.
+
+    Parameters
+    ----------
+    adapter : Adapter
+    mech : Mechanism
+    method : str
+        Adapter method string, ``NAME[:key=value,...]``.
+    dt, t_end : float
+        Step and end time, s.
+    reference : Trajectory or None
+        The verified reference (errors, energy scale, assembly branch); None skips those.
+    bounds : Bounds
+        The verdict's bounds.
+    """
+    trajectory = label_failure(
+        mech, judge(mech, simulate_case(adapter, mech, method, dt, t_end), reference, bounds),
+        reference)
+    return CaseResult(trajectory, case_metrics(mech, trajectory, reference))

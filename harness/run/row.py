@@ -1,0 +1,189 @@
+"""One campaign case → one flat result row (scalars only) and its trajectory.
+
+:func:`run_spec` runs a :class:`~harness.run.spec.CaseSpec` the one way every caller does
+(:func:`harness.run.case.run_case`: build → simulate → the stick's verdict → metrics), against the
+scenario's verified reference when there is one, repeats the timed run, and flattens everything a
+report needs into one tidy row: the stick's metrics, the status with its reason and failure time,
+wall times (the median over the repetitions, per simulated second and per step), the engine's cost
+counters, the model size the engine carried (:meth:`adapters.base.Adapter.model_size`) and the
+versions.  Nested values (counters, notes, the list of wall times, package versions) are JSON
+strings, so every column holds str, float, int, bool or None.
+
+Columns: ``case_id, scenario, scenario_hash, adapter, adapter_version, method, dt, t_end,
+repetitions, status, reason, failure_time, accurate, main_output, main_output_error, wall_time_s,
+wall_time_per_sim_s, wall_time_per_step_s, wall_times_s, steps, rhs_evals, counters, notes,
+n_coordinates, n_constraint_equations, n_redundant_equations, model_notes, reference, packages``,
+every scalar of :func:`harness.measure.metrics.case_metrics` (``samples``, ``final_time``,
+``max_constraint_violation``, ``max_velocity_violation``, ``max_energy_error_J``,
+``max_energy_error_rel``, ``max_joint_gap_m`` …), and per scenario output ``error_<output>``
+(max |y − y_ref|, rad, rad/s or m) and ``final_<output>`` (its value at the last sample).
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from dataclasses import dataclass
+
+import numpy as np
+import scipy
+
+from adapters import get_adapter
+from adapters.base import Adapter, UnsupportedCase, describe
+from harness.model import scenario
+from harness.run.spec import CaseSpec, main_output
+from harness.run.case import run_case, simulate_case
+from harness.common.jsonout import dumps
+from harness.measure.metrics import constraint_violations
+from harness.model.mechanism import Mechanism
+from harness.references.build import ReferenceBuildError, reference_trajectory
+from harness.model.trajectory import Trajectory
+from harness.measure.verdict import Bounds
+
+#: The calibration case: a fixed in-house run whose wall time is the machine-speed figure that
+#: makes times of different runs and machines comparable as ratios (8000 RK4 steps with
+#: projection; measured 1.05 s of stepping, 1.15 s in all, on the 2-core development machine).
+CALIBRATION = CaseSpec("fourbar", "inhouse", "rk4+direct", 5e-4, 4.0)
+
+
+@dataclass
+class CaseOutcome:
+    """A finished case: its row (see the module docstring) and its judged trajectory."""
+
+    row: dict
+    trajectory: Trajectory
+
+
+def calibration_spec() -> CaseSpec:
+    """The fixed calibration case (:data:`CALIBRATION`)."""
+    return CALIBRATION
+
+
+def packages(adapter: Adapter) -> str:
+    """JSON of the versions that produced a row: numpy, scipy and the engine."""
+    return json.dumps({"numpy": np.__version__, "scipy": scipy.__version__,
+                       "engine": adapter.version()}, sort_keys=True)
+
+
+def _load_reference(mech: Mechanism) -> tuple[Trajectory | None, str]:
+    """The verified reference and the ``reference`` column: ``"verified"`` or ``"none: why"``."""
+    try:
+        return reference_trajectory(mech), "verified"
+    except ReferenceBuildError as error:
+        return None, f"none: {' '.join(str(error).split())}"
+
+
+def _model_size(adapter: Adapter, mech: Mechanism) -> dict:
+    """The model-size columns; None with the reason as the note when the engine cannot build."""
+    try:
+        size = adapter.model_size(adapter.build(mech))
+    except UnsupportedCase as error:
+        size = {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
+                "notes": f"not built: {error}"}
+    return {"n_coordinates": size["coordinates"],
+            "n_constraint_equations": size["constraint_equations"],
+            "n_redundant_equations": size["redundant_equations"],
+            "model_notes": size["notes"]}
+
+
+def _spec_columns(spec: CaseSpec) -> dict:
+    return {"case_id": spec.case_id, "scenario": spec.scenario, "adapter": spec.adapter,
+            "method": spec.method, "dt": spec.dt, "t_end": spec.t_end,
+            "repetitions": spec.repetitions}
+
+
+def _blank_metrics(mech: Mechanism) -> dict:
+    """Every float metric column of ``mech``'s rows, NaN (a case without samples)."""
+    nan = float("nan")
+    blank = {"final_time": nan, "max_energy_error_J": nan, "max_energy_error_rel": nan,
+             **constraint_violations(mech, Trajectory.empty(len(mech.bodies)))}
+    for output in mech.outputs:
+        blank[f"error_{output.name}"] = nan
+        blank[f"final_{output.name}"] = nan
+    return blank
+
+
+def _metric_columns(metrics: dict, mech: Mechanism) -> dict:
+    """case_metrics flattened: scalars as they are, nested values as JSON or per-output columns;
+    metrics a run without samples lacks are NaN."""
+    row = _blank_metrics(mech) | {
+        key: value for key, value in metrics.items()
+        if key not in ("counters", "notes", "outputs", "output_errors", "wall_time_s")}
+    row["counters"] = dumps(metrics["counters"], indent=None)
+    row["notes"] = dumps(metrics["notes"], indent=None)
+    for name, value in metrics.get("output_errors", {}).items():
+        row[f"error_{name}"] = value
+    for name, value in metrics.get("outputs", {}).items():
+        row[f"final_{name}"] = value
+    return row
+
+
+def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseOutcome:
+    """Run one case and flatten it into a row.
+
+    Parameters
+    ----------
+    spec : CaseSpec
+    bounds : Bounds
+        The verdict's bounds.
+    accuracy : float
+        Threshold on the main output's error (rad or m) for the ``accurate`` column.
+
+    Returns
+    -------
+    CaseOutcome
+        Never raises for engine trouble: that is the row's status.  An exception raised outside
+        the engine's run (building the model, measuring it) gives status ``failed`` with the
+        exception as the reason.
+    """
+    mech = scenario.load(spec.scenario)
+    adapter = get_adapter(spec.adapter)
+    reference, reference_column = _load_reference(mech)
+    try:
+        result = run_case(adapter, mech, spec.method, spec.dt, spec.t_end, reference, bounds)
+        walls = [result.trajectory.wall_time_s]
+        for _ in range(spec.repetitions - 1):
+            walls.append(simulate_case(adapter, mech, spec.method, spec.dt, spec.t_end).wall_time_s)
+        size = _model_size(adapter, mech)
+    except Exception as error:  # a build or measuring failure is a result (DESIGN rule 6)
+        row = error_row(spec, "failed", describe(error))
+        row["reference"] = reference_column
+        return CaseOutcome(row, Trajectory.empty(len(mech.bodies), status="failed",
+                                                 reason=row["reason"], failure_time=0.0))
+    trajectory, metrics = result.trajectory, result.metrics
+    main = main_output(mech)
+    error = metrics.get("output_errors", {}).get(main, float("nan"))
+    wall = statistics.median(walls)
+    row = {
+        **_spec_columns(spec),
+        "scenario_hash": mech.content_hash, "adapter_version": adapter.version(),
+        **_metric_columns(metrics, mech),
+        "accurate": None if reference is None else bool(
+            trajectory.status == "ok" and error <= accuracy),
+        "main_output": main, "main_output_error": error,
+        "wall_time_s": wall, "wall_time_per_sim_s": wall / spec.t_end,
+        "wall_time_per_step_s": wall / trajectory.steps if trajectory.steps else float("nan"),
+        "wall_times_s": json.dumps(walls),
+        **size,
+        "reference": reference_column, "packages": packages(adapter),
+    }
+    return CaseOutcome(row, trajectory)
+
+
+def error_row(spec: CaseSpec, status: str, reason: str) -> dict:
+    """A row for a case that produced no outcome (``crashed``, ``timeout``): the same columns as
+    :func:`run_spec`'s, metrics NaN, counts and model size None."""
+    nan = float("nan")
+    row = {**_spec_columns(spec), "scenario_hash": None, "adapter_version": None,
+           "status": status, "reason": reason, "failure_time": None, "accurate": False,
+           "main_output": None, "main_output_error": nan, "wall_time_s": nan,
+           "wall_time_per_sim_s": nan, "wall_time_per_step_s": nan, "wall_times_s": "[]",
+           "steps": None, "rhs_evals": None, "counters": "{}", "notes": "[]", "samples": 0,
+           "n_coordinates": None, "n_constraint_equations": None, "n_redundant_equations": None,
+           "model_notes": "", "reference": None, "packages": None}
+    try:
+        mech = scenario.load(spec.scenario)
+    except scenario.ScenarioError:
+        return row
+    return row | _blank_metrics(mech) | {"scenario_hash": mech.content_hash,
+                                         "main_output": main_output(mech)}

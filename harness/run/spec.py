@@ -1,0 +1,545 @@
+"""Campaign files (TOML, one campaign per file in ``campaigns/``): which cases a run computes.
+
+A campaign is scenarios × adapters × methods × step sizes, written as one or more ``[[group]]``
+blocks (so one file can combine, say, every engine's ``default`` over some steps with the in-house
+methods over others), plus the run's settings.  The validator walks the whole file, collects every
+problem with its field path and raises one :class:`CampaignError` listing them all (the style of
+:mod:`harness.model.scenario`), before anything runs.
+
+File format (times in s)::
+
+    description = "free text"
+    repetitions = 1               # timing repetitions per case (>= 1); metrics from the first
+    timeout_s = 600.0             # wall-clock limit per case, all repetitions together (> 0)
+    accuracy = 1e-6               # threshold on the main output's error (rad or m): "accurate"
+                                  # and the stability sweep's target
+    calibration = true            # run the calibration case (harness.run.row.calibration_spec)
+
+    [bounds]                      # optional: the verdict's bounds (harness.measure.verdict.Bounds fields)
+    gap = 5e-3                    # gap, orientation, energy, branch, trajectory; positive;
+                                  # unnamed: defaults
+    energy = 5e-2
+
+    [t_end]                       # optional: duration overrides, s, per scenario name;
+    "*" = 0.5                     # "*" applies to every scenario not named
+    slider_crank = 1.0
+
+    [[group]]                     # any number, at least one
+    scenarios = "all"             # or a list of scenario names (scenarios/<name>.toml)
+    except = ["andrews"]          # optional, only beside "all": scenarios left out of it
+    adapters = ["mujoco", "exudyn"]   # or "all" (every registered adapter)
+    methods = ["default", "best"] # method strings NAME[:key=value,...] for every adapter above
+    dts = [1e-2, 1e-3]            # steps, s (first-step hints of adaptive methods)
+    repetitions = 3               # optional overrides of the top-level settings for this group
+    timeout_s = 1200.0
+    t_end = { fourbar = 2.0 }     # optional, merged over the top-level [t_end]
+
+    [[group]]
+    scenarios = ["fourbar"]
+    methods = { inhouse = ["rk4+direct:proj_tol=1e-12", "ida"] }   # a table: methods per
+    dts = [1e-4]                  # adapter (its keys are the adapters; no ``adapters`` key then)
+
+    [sweep]                       # optional stability sweep: for each (scenario, adapter, method)
+    scenarios = ["fourbar"]       # the largest dt in [dt_min, dt_max] that gives an ok run within
+    adapters = ["inhouse"]        # ``accuracy`` on the main output, found by bisection
+    methods = ["rk4+none"]        # (list, or a table per adapter as in a group)
+    dt_min = 1e-5
+    dt_max = 1e-2
+    max_bisections = 12
+
+Rules checked: known keys only; scenario files that exist and load; registered adapters; method
+strings the adapter accepts (:meth:`adapters.base.Adapter.method_spec`: unknown names and unknown
+parameters are rejected; engines are imported only for the adapters a file names); ``except``
+names scenarios of ``"all"``; steps finite, > 0 and dividing each scenario's evaluation step (its
+``sample_step``, 0.01 s unless the scene sets it; :func:`harness.model.timegrid.steps_per_sample`) and every
+duration they are used with (t_end an integer multiple of dt, :data:`adapters.base.GRID_RTOL`);
+durations finite, > 0 and not beyond the scenario's own (its reference ends there); repetitions an
+integer >= 1, timeout and accuracy > 0.
+
+Expansion is deterministic: groups in file order, and within a group scenarios (listed order;
+``"all"``: sorted names), adapters, methods, steps in that nesting.  A case already produced by an
+earlier group (same :attr:`CaseSpec.case_id`) is kept once, with the earlier group's settings.
+Whether an engine can run a case (e.g. a spatial-only method on a planar scene) is not checked
+here: such a case is a result with status ``unsupported``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
+
+from adapters import adapter_names, get_adapter
+from adapters.base import GRID_RTOL, Adapter
+from harness.model import scenario
+from harness.model.mechanism import Mechanism
+from harness.model.timegrid import steps_per_sample
+from harness.model.scenario import Problem, _Collector, _join
+from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+
+CAMPAIGN_DIR = Path(__file__).resolve().parents[2] / "campaigns"
+
+#: Settings when a file does not give them.
+DEFAULT_REPETITIONS = 1
+DEFAULT_TIMEOUT_S = 600.0
+#: Key of the ``[t_end]`` table that applies to every scenario not named in it.
+EVERY_SCENARIO = "*"
+
+_TOP_KEYS = {"description", "repetitions", "timeout_s", "accuracy", "calibration", "bounds",
+             "t_end", "group", "sweep"}
+_GROUP_KEYS = {"scenarios", "except", "adapters", "methods", "dts", "repetitions", "timeout_s",
+               "t_end"}
+_SWEEP_KEYS = {"scenarios", "except", "adapters", "methods", "dt_min", "dt_max", "max_bisections"}
+_BOUND_KEYS = {f.name for f in fields(Bounds)}
+
+
+@dataclass(frozen=True)
+class CaseSpec:
+    """One case of a campaign.
+
+    Attributes
+    ----------
+    scenario : str
+        Scenario name (``scenarios/<name>.toml``).
+    adapter : str
+        Registry name.
+    method : str
+        Method string ``NAME[:key=value,...]`` as written in the campaign.
+    dt : float
+        Step, s; divides the evaluation step 0.01 s and ``t_end``.
+    t_end : float
+        Duration, s: the scenario's unless the campaign overrides it.
+    repetitions : int
+        Timing repetitions (>= 1); the metrics come from the first run.
+    timeout_s : float
+        Wall-clock limit of the whole case (all repetitions), s.
+    """
+
+    scenario: str
+    adapter: str
+    method: str
+    dt: float
+    t_end: float
+    repetitions: int = DEFAULT_REPETITIONS
+    timeout_s: float = DEFAULT_TIMEOUT_S
+
+    @property
+    def case_id(self) -> str:
+        """Stable, readable and unique: ``"fourbar|mujoco|best|0.001|4.0"``."""
+        return f"{self.scenario}|{self.adapter}|{self.method}|{self.dt!r}|{self.t_end!r}"
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """The stability sweep of a campaign.
+
+    Attributes
+    ----------
+    scenarios, adapters : tuple of str
+    methods : dict
+        Adapter name → tuple of method strings.
+    dt_min, dt_max : float
+        Bisection bounds, s; each divides 0.01 s.  Candidates are a scene's evaluation step
+        (``sample_steps``, 0.01 s unless the scene declares a finer one) / k for integer k.
+    max_bisections : int
+    t_end : dict
+        Scenario name → duration of its sweep runs, s (the campaign's top-level ``[t_end]``
+        overrides, else the scenario's duration).
+    sample_steps : dict
+        Scenario name → its evaluation step, s.
+    """
+
+    scenarios: tuple[str, ...]
+    adapters: tuple[str, ...]
+    methods: dict[str, tuple[str, ...]]
+    dt_min: float
+    dt_max: float
+    max_bisections: int
+    t_end: dict[str, float] = dataclasses.field(default_factory=dict)
+    sample_steps: dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    """A validated, expanded campaign file.
+
+    Attributes
+    ----------
+    name : str
+        The file's stem.
+    path : Path
+    text : str
+        The file itself (stored with every run).
+    cases : tuple of CaseSpec
+        Expanded, in deterministic order, without duplicates.
+    bounds : Bounds
+        The verdict's bounds.
+    accuracy : float
+        Threshold on the main output's error, rad or m.
+    sweep : SweepSpec or None
+    calibration : bool
+        Whether a run starts with the calibration case.
+    description : str
+    """
+
+    name: str
+    path: Path
+    text: str
+    cases: tuple[CaseSpec, ...]
+    bounds: Bounds
+    accuracy: float
+    sweep: SweepSpec | None
+    calibration: bool
+    description: str = ""
+
+
+class CampaignError(ValueError):
+    """Raised once per file with every :class:`~harness.model.scenario.Problem` found."""
+
+    def __init__(self, problems: list[Problem]):
+        self.problems = problems
+        super().__init__("\n".join(str(p) for p in problems))
+
+
+def campaign_path(name_or_path: str | Path) -> Path:
+    """``campaigns/<name>.toml`` for a shipped name, else the path as given (a ``.toml`` file)."""
+    path = Path(name_or_path)
+    return path if path.suffix == ".toml" else CAMPAIGN_DIR / f"{name_or_path}.toml"
+
+
+def campaign_names() -> list[str]:
+    """Names of the shipped campaigns, sorted."""
+    return sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
+
+
+def main_output(mech: Mechanism) -> str:
+    """Name of the scenario's main output: its first declared output (the crank angle of the
+    shipped linkages, the crank tip's x of ``double_fourbar``), rad or m."""
+    return mech.outputs[0].name
+
+
+def load_campaign(name_or_path: str | Path) -> Campaign:
+    """Load, validate and expand a campaign by shipped name or by path.
+
+    Raises
+    ------
+    CampaignError
+        With every problem found, each naming the file and the field.
+    """
+    path = campaign_path(name_or_path)
+    file = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+        document = tomllib.loads(text)
+    except FileNotFoundError:
+        known = ", ".join(campaign_names())
+        raise CampaignError([Problem(file, "-", f"no such campaign file (shipped: {known})")]) \
+            from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise CampaignError([Problem(file, "-", f"not valid TOML: {error}")]) from None
+    return _Reader(file, document).read(path, text)
+
+
+class _Reader:
+    """Turns a parsed campaign document into a :class:`Campaign`, collecting problems."""
+
+    def __init__(self, file: str, document: dict):
+        self.c = _Collector(file)
+        self.document = document
+        self._mechanisms: dict[str, Mechanism | None] = {}
+        self._adapters: dict[str, Adapter | None] = {}
+        self._methods_checked: set[tuple[str, str]] = set()
+
+    def read(self, path: Path, text: str) -> Campaign:
+        doc, c = self.document, self.c
+        c.unknown_keys(doc, _TOP_KEYS, "")
+        description = doc.get("description", "")
+        if not isinstance(description, str):
+            c.add("description", f"expected a string, got {description!r}")
+        repetitions = self._count(doc, "repetitions", "", DEFAULT_REPETITIONS)
+        timeout = self._positive(doc, "timeout_s", "", DEFAULT_TIMEOUT_S)
+        accuracy = self._positive(doc, "accuracy", "", DEFAULT_ACCURACY)
+        calibration = doc.get("calibration", True)
+        if not isinstance(calibration, bool):
+            c.add("calibration", f"expected true or false, got {calibration!r}")
+        bounds = self._bounds(doc.get("bounds", {}))
+        t_end = self._durations(doc.get("t_end", {}), "t_end")
+        cases = self._groups(doc, repetitions, timeout, t_end)
+        sweep = self._sweep(doc["sweep"], t_end) if "sweep" in doc else None
+        if c.problems:
+            raise CampaignError(c.problems)
+        return Campaign(name=path.stem, path=path, text=text, cases=tuple(cases), bounds=bounds,
+                        accuracy=accuracy, sweep=sweep, calibration=calibration,
+                        description=description)
+
+    # --- settings -----------------------------------------------------------------------------
+
+    def _count(self, table: dict, key: str, path: str, default: int, least: int = 1) -> int:
+        value = table.get(key, default)
+        if isinstance(value, bool) or not isinstance(value, int) or value < least:
+            self.c.add(_join(path, key), f"expected an integer >= {least}, got {value!r}")
+            return default
+        return value
+
+    def _positive(self, table: dict, key: str, path: str, default: float | None) -> float | None:
+        value = self.c.number(table, key, path, default=default, positive=True)
+        return default if value is None else value
+
+    def _bounds(self, table: Any) -> Bounds:
+        if not isinstance(table, dict):
+            self.c.add("bounds", f"expected a table, got {table!r}")
+            return DEFAULT_BOUNDS
+        self.c.unknown_keys(table, _BOUND_KEYS, "bounds")
+        values = {key: self.c.number(table, key, "bounds", positive=True)
+                  for key in _BOUND_KEYS if key in table}
+        return Bounds(**{key: value for key, value in values.items() if value is not None})
+
+    def _durations(self, table: Any, path: str) -> dict[str, float]:
+        """A ``t_end`` table: scenario name (or ``"*"``) → s, each checked against it."""
+        if not isinstance(table, dict):
+            self.c.add(path, f"expected a table of scenario = seconds, got {table!r}")
+            return {}
+        durations = {}
+        for key in table:
+            value = self.c.number(table, key, path, positive=True)
+            if key != EVERY_SCENARIO:
+                mech = self._mechanism(key, _join(path, key))
+                if mech is not None and value is not None and value > mech.duration:
+                    self.c.add(_join(path, key), f"{value!r} s is beyond the scenario's duration "
+                               f"{mech.duration!r} s (its reference ends there)")
+                    value = None
+            if value is not None:
+                durations[key] = value
+        return durations
+
+    # --- names --------------------------------------------------------------------------------
+
+    def _mechanism(self, name: Any, field: str) -> Mechanism | None:
+        if not isinstance(name, str):
+            self.c.add(field, f"expected a scenario name, got {name!r}")
+            return None
+        if name not in self._mechanisms:
+            if not scenario.is_scenario_name(name):
+                known = ", ".join(scenario.scenario_names())
+                self.c.add(field, f"unknown scenario {name!r} (known: {known})")
+                self._mechanisms[name] = None
+                return None
+            try:
+                self._mechanisms[name] = scenario.load(name)
+            except scenario.ScenarioError as error:
+                self.c.add(field, f"scenario {name!r} does not load: {error}")
+                self._mechanisms[name] = None
+                return None
+        return self._mechanisms[name]
+
+    def _adapter(self, name: Any, field: str) -> Adapter | None:
+        if not isinstance(name, str) or name not in adapter_names():
+            self.c.add(field, f"unknown adapter {name!r} (known: {', '.join(adapter_names())})")
+            return None
+        if name not in self._adapters:
+            try:
+                self._adapters[name] = get_adapter(name)
+            except ImportError as error:
+                self.c.add(field, f"adapter {name!r} cannot be imported: {error}")
+                self._adapters[name] = None
+        return self._adapters[name]
+
+    def _names(self, table: dict, key: str, path: str, everything: list[str]) -> list[str]:
+        """A list of names, or ``"all"``; problems recorded, [] when unusable."""
+        value = self.c.required(table, key, path)
+        if value == "all":
+            return list(everything)
+        if (not isinstance(value, list) or not value
+                or not all(isinstance(v, str) for v in value)):
+            if value is not None:
+                self.c.add(_join(path, key), f'expected "all" or a non-empty list of names, '
+                           f"got {value!r}")
+            return []
+        return value
+
+    def _scenarios(self, table: dict, path: str) -> list[tuple[str, Mechanism]]:
+        names = self._without_excepted(
+            table, path, self._names(table, "scenarios", path, scenario.scenario_names()))
+        found = [(n, self._mechanism(n, f"{_join(path, 'scenarios')}[{i}]"))
+                 for i, n in enumerate(names)]
+        return [(n, mech) for n, mech in found if mech is not None]
+
+    def _without_excepted(self, table: dict, path: str, names: list[str]) -> list[str]:
+        """``names`` less the table's ``except`` list, which only ``scenarios = "all"`` takes and
+        which must name scenarios of it; problems recorded, ``names`` unchanged then."""
+        if "except" not in table:
+            return names
+        field, left_out = _join(path, "except"), table["except"]
+        if table.get("scenarios") != "all":
+            self.c.add(field, 'allowed only with scenarios = "all"')
+            return names
+        if not isinstance(left_out, list) or not all(isinstance(n, str) for n in left_out):
+            self.c.add(field, f"expected a list of scenario names, got {left_out!r}")
+            return names
+        for i, name in enumerate(left_out):
+            if name not in names:
+                self.c.add(f"{field}[{i}]", f"unknown scenario {name!r} (known: "
+                           f"{', '.join(names)})")
+        return [name for name in names if name not in left_out]
+
+    def _methods(self, table: dict, path: str) -> dict[str, list[str]]:
+        """Adapter → method strings, from ``adapters`` + a ``methods`` list or a ``methods``
+        table; each method checked by the adapter."""
+        methods = self.c.required(table, "methods", path)
+        field = _join(path, "methods")
+        if isinstance(methods, dict):
+            if "adapters" in table:
+                self.c.add(_join(path, "adapters"), "not allowed when methods is a table "
+                           "(its keys name the adapters)")
+            chosen = {name: (value, f"{field}.{name}") for name, value in methods.items()}
+            fields_of = {name: f"{field}.{name}" for name in methods}
+        elif isinstance(methods, list):
+            adapters = self._names(table, "adapters", path, adapter_names())
+            chosen = {name: (methods, field) for name in adapters}
+            fields_of = {name: f"{_join(path, 'adapters')}[{i}]" for i, name in enumerate(adapters)}
+        else:
+            if methods is not None:
+                self.c.add(field, f"expected a list of method strings or a table of them per "
+                           f"adapter, got {methods!r}")
+            return {}
+        result = {}
+        for name, (strings, strings_field) in chosen.items():
+            adapter = self._adapter(name, fields_of[name])
+            valid = self._method_strings(adapter, name, strings, strings_field)
+            if adapter is not None and valid:
+                result[name] = valid
+        return result
+
+    def _method_strings(self, adapter: Adapter | None, name: str, strings: Any,
+                        field: str) -> list[str]:
+        if not isinstance(strings, list) or not strings:
+            self.c.add(field, f"expected a non-empty list of method strings, got {strings!r}")
+            return []
+        valid = []
+        for i, method in enumerate(strings):
+            if not isinstance(method, str):
+                self.c.add(f"{field}[{i}]", f"expected a method string, got {method!r}")
+                continue
+            if adapter is None:
+                continue
+            if (name, method) not in self._methods_checked:
+                try:
+                    adapter.method_spec(method)
+                except ValueError as error:
+                    self.c.add(f"{field}[{i}]", str(error))
+                    continue
+                self._methods_checked.add((name, method))
+            valid.append(method)
+        return valid
+
+    def _steps(self, table: dict, path: str) -> list[tuple[int, float]]:
+        """(index, dt) of every valid step of a ``dts`` list."""
+        value = self.c.required(table, "dts", path)
+        field = _join(path, "dts")
+        if not isinstance(value, list) or not value:
+            if value is not None:
+                self.c.add(field, f"expected a non-empty list of steps (s), got {value!r}")
+            return []
+        steps = []
+        for i, dt in enumerate(value):
+            checked = self._step(dt, f"{field}[{i}]")
+            if checked is not None:
+                steps.append((i, checked))
+        return steps
+
+    def _step(self, dt: Any, field: str) -> float | None:
+        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) \
+                or dt <= 0:
+            self.c.add(field, f"expected a finite step > 0 (s), got {dt!r}")
+            return None
+        try:
+            steps_per_sample(float(dt))
+        except ValueError as error:
+            self.c.add(field, str(error))
+            return None
+        return float(dt)
+
+    # --- groups -------------------------------------------------------------------------------
+
+    def _groups(self, doc: dict, repetitions: int, timeout: float,
+                t_end: dict[str, float]) -> list[CaseSpec]:
+        groups = doc.get("group")
+        if not isinstance(groups, list) or not groups or not all(isinstance(g, dict)
+                                                                 for g in groups):
+            self.c.add("group", "expected one or more [[group]] tables")
+            return []
+        cases: dict[str, CaseSpec] = {}
+        for index, group in enumerate(groups):
+            for case in self._group(group, f"group[{index}]", repetitions, timeout, t_end):
+                cases.setdefault(case.case_id, case)
+        return list(cases.values())
+
+    def _group(self, group: dict, path: str, repetitions: int, timeout: float,
+               t_end: dict[str, float]) -> list[CaseSpec]:
+        self.c.unknown_keys(group, _GROUP_KEYS, path)
+        repetitions = self._count(group, "repetitions", path, repetitions)
+        timeout = self._positive(group, "timeout_s", path, timeout)
+        durations = t_end | self._durations(group.get("t_end", {}), _join(path, "t_end"))
+        scenes = self._scenarios(group, path)
+        methods = self._methods(group, path)
+        steps = self._steps(group, path)
+        cases = []
+        for name, mech in scenes:
+            duration = self._duration(durations, name, mech)
+            usable = [dt for i, dt in steps
+                      if self._divides(dt, duration, f"{_join(path, 'dts')}[{i}]", name)
+                      and self._samples(dt, mech, f"{_join(path, 'dts')}[{i}]")]
+            cases += [CaseSpec(name, adapter, method, dt, duration, repetitions, timeout)
+                      for adapter, strings in methods.items() for method in strings
+                      for dt in usable]
+        return cases
+
+    @staticmethod
+    def _duration(durations: dict[str, float], name: str, mech: Mechanism) -> float:
+        """The duration of scenario ``name`` under the overrides (never beyond its own), s."""
+        return min(durations.get(name, durations.get(EVERY_SCENARIO, mech.duration)),
+                   mech.duration)
+
+    def _divides(self, dt: float, duration: float, field: str, name: str) -> bool:
+        count = round(duration / dt)
+        if count >= 1 and abs(duration - count * dt) <= GRID_RTOL * max(duration, dt):
+            return True
+        self.c.add(field, f"step {dt!r} s does not divide the duration {duration!r} s of "
+                   f"scenario {name!r} (t_end must be an integer multiple of dt)")
+        return False
+
+    def _samples(self, dt: float, mech: Mechanism, field: str) -> bool:
+        """Whether ``dt`` divides the scene's own evaluation step (``sample_step``)."""
+        try:
+            steps_per_sample(dt, mech.sample_step)
+        except ValueError as error:
+            self.c.add(field, f"scenario {mech.name!r}: {error}")
+            return False
+        return True
+
+    # --- sweep --------------------------------------------------------------------------------
+
+    def _sweep(self, table: Any, t_end: dict[str, float]) -> SweepSpec | None:
+        if not isinstance(table, dict):
+            self.c.add("sweep", f"expected a table, got {table!r}")
+            return None
+        self.c.unknown_keys(table, _SWEEP_KEYS, "sweep")
+        scenes = self._scenarios(table, "sweep")
+        methods = self._methods(table, "sweep")
+        dt_min, dt_max = (self._step(table[key], f"sweep.{key}") if key in table
+                          else self.c.required(table, key, "sweep") for key in ("dt_min", "dt_max"))
+        bisections = self._count(table, "max_bisections", "sweep", 12)
+        if dt_min is not None and dt_max is not None and dt_min >= dt_max:
+            self.c.add("sweep.dt_min", f"must be below dt_max = {dt_max!r}, got {dt_min!r}")
+        if dt_min is None or dt_max is None:
+            return None
+        durations = {name: self._duration(t_end, name, mech) for name, mech in scenes}
+        for name, duration in durations.items():
+            for key, dt in (("dt_min", dt_min), ("dt_max", dt_max)):
+                self._divides(dt, duration, f"sweep.{key}", name)
+        return SweepSpec(tuple(durations), tuple(methods),
+                         {a: tuple(m) for a, m in methods.items()}, dt_min, dt_max, bisections,
+                         durations, {name: mech.sample_step for name, mech in scenes})

@@ -1,0 +1,6 @@
+"""What users put in their own test suites: the pytest plugin (``plugin``), the
+tolerance assertions (``tolerances``), the case selection and runner behind the plugin's
+fixtures (``cases``) and Hypothesis strategies that draw valid mechanisms (``strategies``).
+
+May import: every layer below it up to :mod:`harness.run`; not :mod:`harness.report`.
+"""

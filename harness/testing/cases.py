@@ -1,0 +1,273 @@
+"""Harness cases run inside the caller's process, for tolerance assertions (:mod:`harness.testing.tolerances`)
+and the pytest plugin (:mod:`harness.testing.plugin`).
+
+* :class:`CaseRunner` runs cases (:func:`harness.run.row.run_spec`: the same build → simulate →
+  verdict → metrics as a campaign) and keeps every finished case for the session, so a
+  parametrized suite that asks for a case twice runs it once; it also loads references and runs
+  the calibration case (:func:`harness.run.row.calibration_spec`) once, for calibrated time
+  ratios;
+* :func:`campaign_cases`, a campaign file turned into (readable id, case) pairs for parametrized
+  tests (ids like ``fourbar-mujoco-best-dt1e-3``), and :class:`Selection`, the command line's
+  choice of scenarios and adapters.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from harness.model import scenario
+from harness.run.spec import CaseSpec, load_campaign, main_output
+from harness.model.mechanism import Mechanism
+from harness.model.outputs import output_series
+from harness.references.build import ReferenceBuildError, reference_trajectory
+from harness.model.timegrid import reference_indices
+from harness.model.trajectory import Trajectory
+from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+
+#: Key of a tolerance table (and of a :class:`Selection`) that matches every name.
+ANY = "*"
+
+
+class ToleranceError(ValueError):
+    """A tolerance file, or an assertion's arguments, that cannot be used; the message says
+    which file or argument, which field and why."""
+
+
+def case_spec(scenario_name: str, adapter: str, method: str, dt: float,
+              t_end: float | None = None, repetitions: int = 1) -> CaseSpec:
+    """A :class:`~harness.run.spec.CaseSpec` with the scenario's own duration unless ``t_end``
+    (s) is given.  ``repetitions`` > 1 times the case that often (the median wall time)."""
+    if t_end is None:
+        t_end = scenario.load(scenario_name).duration
+    return CaseSpec(scenario_name, adapter, method, float(dt), float(t_end), repetitions)
+
+
+def step_text(dt: float) -> str:
+    """A step size as short scientific text: 1e-3 → ``"1e-3"``, 5e-4 → ``"5e-4"``."""
+    return np.format_float_scientific(dt, trim="-", exp_digits=1).replace("e+", "e")
+
+
+def case_label(spec: CaseSpec) -> str:
+    """The readable id of a case: ``fourbar-mujoco-best-dt1e-3``."""
+    return f"{spec.scenario}-{spec.adapter}-{spec.method}-dt{step_text(spec.dt)}"
+
+
+def campaign_cases(name_or_path, scenarios=None, adapters=None) -> list[tuple[str, CaseSpec]]:
+    """(label, case) for every case of a campaign, in the campaign's order.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+        A shipped campaign name (``campaigns/<name>.toml``) or a campaign file.
+    scenarios, adapters : iterable of str, optional
+        Keep only these (default: all).
+
+    Returns
+    -------
+    list of (str, CaseSpec)
+        Labels are :func:`case_label`, with ``-t<t_end>`` appended where two cases would
+        otherwise share one.
+
+    Raises
+    ------
+    harness.run.spec.CampaignError
+        For a campaign file with mistakes (every one named).
+    """
+    keep = Selection.of(scenarios, adapters)
+    cases = [spec for spec in load_campaign(name_or_path).cases if keep.reason(spec) is None]
+    labels = [case_label(spec) for spec in cases]
+    shared = {label for label in labels if labels.count(label) > 1}
+    return [(f"{label}-t{spec.t_end:g}" if label in shared else label, spec)
+            for label, spec in zip(labels, cases)]
+
+
+@dataclass(frozen=True)
+class Selection:
+    """The scenarios and adapters a session runs (None: all), e.g. from ``--mbh-scenarios``."""
+
+    scenarios: frozenset[str] | None = None
+    adapters: frozenset[str] | None = None
+
+    @classmethod
+    def of(cls, scenarios=None, adapters=None) -> "Selection":
+        """From iterables of names (None: all)."""
+        return cls(None if scenarios is None else frozenset(scenarios),
+                   None if adapters is None else frozenset(adapters))
+
+    @classmethod
+    def parse(cls, scenarios: str | None, adapters: str | None) -> "Selection":
+        """From comma-separated lists (``"fourbar,slider_crank"``); None or empty: all.
+
+        Raises
+        ------
+        ToleranceError
+            Naming an unknown scenario or adapter and the known ones.
+        """
+        from adapters import adapter_names
+
+        def names(text, known, option, is_known=None):
+            is_known = is_known or known.__contains__
+            chosen = [name.strip() for name in (text or "").split(",") if name.strip()]
+            unknown = [name for name in chosen if not is_known(name)]
+            if unknown:
+                raise ToleranceError(f"{option}: unknown {', '.join(unknown)} (known: "
+                                     f"{', '.join(known)})")
+            return frozenset(chosen) if chosen else None
+        return cls(names(scenarios, scenario.scenario_names(), "--mbh-scenarios",
+                         scenario.is_scenario_name),
+                   names(adapters, adapter_names(), "--mbh-adapters"))
+
+    def reason(self, spec: CaseSpec) -> str | None:
+        """Why ``spec`` is not selected, or None when it is."""
+        if self.scenarios is not None and spec.scenario not in self.scenarios:
+            return (f"scenario {spec.scenario} not selected (--mbh-scenarios "
+                    f"{','.join(sorted(self.scenarios))})")
+        if self.adapters is not None and spec.adapter not in self.adapters:
+            return (f"adapter {spec.adapter} not selected (--mbh-adapters "
+                    f"{','.join(sorted(self.adapters))})")
+        return None
+
+
+@dataclass
+class CaseResult:
+    """A finished case.
+
+    Attributes
+    ----------
+    spec : CaseSpec
+    row : dict
+        The campaign row (:func:`harness.run.row.run_spec`): status, reason, errors, wall time…
+    trajectory : Trajectory
+        The judged trajectory, sampled every 10 ms.
+    mechanism : Mechanism
+    reference : Trajectory or None
+        The scenario's verified reference (None when it has none).
+    calibration : callable
+        Returns the session's calibration time, s (run once, on first use).
+    """
+
+    spec: CaseSpec
+    row: dict
+    trajectory: Trajectory
+    mechanism: Mechanism
+    reference: Trajectory | None
+    calibration: Callable[[], float] = field(repr=False)
+
+    @property
+    def label(self) -> str:
+        """:func:`case_label` of the case."""
+        return case_label(self.spec)
+
+    @property
+    def status(self) -> str:
+        return self.trajectory.status
+
+    @property
+    def wall_time_s(self) -> float:
+        """The case's wall time, s (median over its repetitions)."""
+        return float(self.row["wall_time_s"])
+
+    @property
+    def calibrated_time(self) -> float:
+        """Wall time / the calibration case's wall time (dimensionless)."""
+        return self.wall_time_s / self.calibration()
+
+    def describe(self) -> str:
+        """``case fourbar-mujoco-best-dt1e-3 (t_end 0.5 s, status ok)``."""
+        return f"case {self.label} (t_end {self.spec.t_end:g} s, status {self.status})"
+
+    def output(self, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(sample times in s, output values) of output ``name`` (default the main output)."""
+        name = name or main_output(self.mechanism)
+        if name not in {o.name for o in self.mechanism.outputs}:
+            known = ", ".join(o.name for o in self.mechanism.outputs)
+            raise ToleranceError(f"{self.describe()}: scenario {self.spec.scenario} has no "
+                                 f"output {name!r} (outputs: {known})")
+        return self.trajectory.times, output_series(self.mechanism, self.trajectory, name)
+
+    def reference_output(self, name: str | None = None) -> np.ndarray:
+        """The reference's output ``name`` at this case's sample times, shape (n_samples,)."""
+        if self.reference is None:
+            raise AssertionError(f"{self.describe()}: scenario {self.spec.scenario} has no "
+                                 f"verified reference to compare with")
+        name = name or main_output(self.mechanism)
+        values = output_series(self.mechanism, self.reference, name)
+        return values[reference_indices(self.reference, self.trajectory.times)]
+
+
+class CaseRunner:
+    """Runs cases in this process and keeps them for the session.
+
+    Parameters
+    ----------
+    bounds : Bounds
+        The verdict's bounds (:mod:`harness.measure.verdict`).
+    accuracy : float
+        The ``accurate`` column's threshold on the main output's error, rad or m.
+    """
+
+    def __init__(self, bounds: Bounds = DEFAULT_BOUNDS, accuracy: float = DEFAULT_ACCURACY):
+        self.bounds, self.accuracy = bounds, accuracy
+        self._results: dict[str, CaseResult] = {}
+        self._references: dict[str, Trajectory | None] = {}
+        self._calibration_s: float | None = None
+
+    @property
+    def finished(self) -> dict[str, CaseResult]:
+        """Every case run so far, by :attr:`CaseSpec.case_id`."""
+        return dict(self._results)
+
+    def reference(self, scenario_name: str) -> Trajectory | None:
+        """The verified reference of a scenario (None when it has none), loaded once."""
+        if scenario_name not in self._references:
+            try:
+                self._references[scenario_name] = reference_trajectory(
+                    scenario.load(scenario_name))
+            except ReferenceBuildError:
+                self._references[scenario_name] = None
+        return self._references[scenario_name]
+
+    def calibration_s(self) -> float:
+        """Wall time of the calibration case in this session, s (run on first call).
+
+        Raises
+        ------
+        RuntimeError
+            When the calibration case does not end ``ok``.
+        """
+        if self._calibration_s is None:
+            from harness.run.row import calibration_spec, run_spec
+
+            row = run_spec(calibration_spec(), DEFAULT_BOUNDS, self.accuracy).row
+            if row["status"] != "ok" or not row["wall_time_s"] > 0:
+                raise RuntimeError(f"calibration case {calibration_spec().case_id} ended "
+                                   f"{row['status']}: {row['reason']}")
+            self._calibration_s = float(row["wall_time_s"])
+        return self._calibration_s
+
+    def run(self, spec: CaseSpec) -> CaseResult:
+        """The finished case ``spec`` (run now unless already run this session)."""
+        from harness.run.row import run_spec
+
+        if spec.case_id not in self._results:
+            self.reference(spec.scenario)  # loaded once per session, not once per case
+            outcome = run_spec(spec, self.bounds, self.accuracy)
+            self._results[spec.case_id] = CaseResult(
+                spec, outcome.row, outcome.trajectory, scenario.load(spec.scenario),
+                self.reference(spec.scenario), self.calibration_s)
+        return self._results[spec.case_id]
+
+    def case(self, scenario_name: str, adapter: str, method: str, dt: float,
+             t_end: float | None = None, repetitions: int = 1) -> CaseResult:
+        """:meth:`run` of :func:`case_spec` (same arguments)."""
+        return self.run(case_spec(scenario_name, adapter, method, dt, t_end, repetitions))
+
+    def steps(self, scenario_name: str, adapter: str, method: str, dts,
+              t_end: float | None = None) -> list[CaseResult]:
+        """One case per step size in ``dts`` (s): the input of :func:`assert_convergence_order`."""
+        return [self.case(scenario_name, adapter, method, dt, t_end) for dt in dts]
+
+

@@ -1,0 +1,140 @@
+"""The ``mbh`` pytest plugin (entry point ``pytest11``, registered by installing the package).
+
+Thin wrappers over :mod:`harness.testing.cases` and :mod:`harness.testing.tolerances`:
+
+* fixture ``mbh_runner`` (session): a :class:`~harness.testing.cases.CaseRunner` whose finished
+  cases are kept for the whole session; a case of a scenario or adapter not selected on the
+  command line is skipped with the reason;
+* fixture ``mbh_reference``: ``mbh_reference("fourbar")`` → the scenario's verified reference
+  (a :class:`~harness.model.trajectory.Trajectory`, None when it has none);
+* fixture ``mbh_tolerances``: the :class:`~harness.testing.tolerances.Tolerances` of ``tolerances.toml``
+  beside the test file (``--mbh-tolerances FILE`` names another), loaded once per file;
+* :func:`campaign_params`: a campaign's cases as ``pytest.param`` objects with readable ids
+  (``fourbar-mujoco-best-dt1e-3``), for ``@pytest.mark.parametrize``;
+* options ``--mbh-scenarios A,B`` and ``--mbh-adapters X,Y``: only those run; a test
+  parametrized with an unselected case is skipped at collection, with the reason.
+
+The assertion helpers are the plain functions of :mod:`harness.testing.tolerances`.  This module imports
+nothing heavy at load time: pytest loads it in every session of this environment.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+#: File name of the tolerance table looked up beside a test file.
+TOLERANCE_FILE = "tolerances.toml"
+
+
+def pytest_addoption(parser) -> None:
+    group = parser.getgroup("mbh", "mbh multibody harness tolerance tests")
+    group.addoption("--mbh-scenarios", default=None, metavar="A,B",
+                    help="run only cases of these scenarios (comma-separated); the others are "
+                         "skipped with the reason")
+    group.addoption("--mbh-adapters", default=None, metavar="X,Y",
+                    help="run only cases of these adapters (comma-separated); the others are "
+                         "skipped with the reason")
+    group.addoption("--mbh-tolerances", default=None, metavar="FILE",
+                    help=f"tolerance file of the fixture mbh_tolerances (default: "
+                         f"{TOLERANCE_FILE} beside each test file)")
+
+
+def _selection(config):
+    from harness.testing.cases import Selection, ToleranceError
+
+    try:
+        return Selection.parse(config.getoption("--mbh-scenarios"),
+                               config.getoption("--mbh-adapters"))
+    except ToleranceError as error:
+        raise pytest.UsageError(str(error)) from None
+
+
+def _specs(value) -> list:
+    """The CaseSpecs in a parameter value (a case, or a list/tuple of cases)."""
+    from harness.run.spec import CaseSpec
+
+    values = value if isinstance(value, (list, tuple)) else [value]
+    return [item for item in values if isinstance(item, CaseSpec)]
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    """Skip (with the reason) every test parametrized with a case not selected."""
+    if not (config.getoption("--mbh-scenarios") or config.getoption("--mbh-adapters")):
+        return
+    selection = _selection(config)
+    for item in items:
+        callspec = getattr(item, "callspec", None)
+        if callspec is None:
+            continue
+        reasons = [reason for value in callspec.params.values() for spec in _specs(value)
+                   if (reason := selection.reason(spec)) is not None]
+        if reasons:
+            item.add_marker(pytest.mark.skip(reason=f"mbh: {reasons[0]}"))
+
+
+def campaign_params(name_or_path, scenarios=None, adapters=None) -> list:
+    """A campaign's cases as ``pytest.param(case, id=label)``
+    (:func:`harness.testing.cases.campaign_cases`, same arguments)."""
+    from harness.testing.cases import campaign_cases
+
+    return [pytest.param(spec, id=label)
+            for label, spec in campaign_cases(name_or_path, scenarios, adapters)]
+
+
+class _SelectingRunner:
+    """The session's CaseRunner, skipping the current test for a case not selected."""
+
+    def __init__(self, runner, selection):
+        self._runner, self._selection = runner, selection
+
+    def __getattr__(self, name):
+        return getattr(self._runner, name)
+
+    def run(self, spec):
+        reason = self._selection.reason(spec)
+        if reason is not None:
+            pytest.skip(f"mbh: {reason}")
+        return self._runner.run(spec)
+
+    def case(self, *args, **kwargs):
+        from harness.testing.cases import case_spec
+
+        return self.run(case_spec(*args, **kwargs))
+
+    def steps(self, scenario_name, adapter, method, dts, t_end=None):
+        return [self.case(scenario_name, adapter, method, dt, t_end) for dt in dts]
+
+
+@pytest.fixture(scope="session")
+def mbh_runner(request):
+    """The session's :class:`harness.testing.cases.CaseRunner` (``run``, ``case``, ``steps``,
+    ``reference``, ``calibration_s``)."""
+    from harness.testing.cases import CaseRunner
+
+    return _SelectingRunner(CaseRunner(), _selection(request.config))
+
+
+@pytest.fixture(scope="session")
+def mbh_reference(mbh_runner):
+    """``mbh_reference(scenario_name)`` → its verified reference (None when it has none)."""
+    return mbh_runner.reference
+
+
+@pytest.fixture(scope="session")
+def _mbh_tolerance_files():
+    return {}
+
+
+@pytest.fixture
+def mbh_tolerances(request, _mbh_tolerance_files):
+    """The :class:`harness.testing.tolerances.Tolerances` beside the test file (or
+    ``--mbh-tolerances``); ``mbh_tolerances.for_case(case)`` → the case's tolerances."""
+    from harness.testing.tolerances import Tolerances
+
+    chosen = request.config.getoption("--mbh-tolerances")
+    path = Path(chosen) if chosen else Path(request.path).parent / TOLERANCE_FILE
+    if path not in _mbh_tolerance_files:
+        _mbh_tolerance_files[path] = Tolerances(path)
+    return _mbh_tolerance_files[path]
