@@ -7,7 +7,7 @@ the compiled loop alone (``Adapter.bare_loop``, best of five 1 s runs at dt = 1e
 generated functions (``loop=generated``, :mod:`adapters.inhouse.generated`) and with the generic
 kernels (``loop=compiled``), then the cost of one call of each piece of a right-hand side at the
 assembled state, each timed inside a compiled loop (so without Python's call overhead): Φ_q, γ,
-the forces Q_e + Q_v, the projection of ``direct`` (002 eq. 127 and 137) and the whole fused
+the forces Q_e + Q_v, the projection of ``direct`` (Rouvinen 2003, eq. 127 and 137) and the whole fused
 acceleration (:func:`~adapters.inhouse.dynamics.index1_acceleration`: the pieces plus the mass
 matrix solve), the last two by the kernels and by the generated functions.  RK4 makes four
 right-hand sides and one projection per step.  Numbers are measured on the machine that runs the

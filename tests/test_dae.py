@@ -1,7 +1,7 @@
 """Method ``ida``: the equations of motion as a DAE solved by SUNDIALS IDA (inhouse/dae.py).
 
 The reference is the index-1 (acceleration-level) ODE q̈ = a(q, v) of the augmented system
-(seed 002 eq. 77) without stabilisation, integrated by SciPy's DOP853 at rtol = atol = 1e-12.
+(Rouvinen 2003, eq. 77) without stabilisation, integrated by SciPy's DOP853 at rtol = atol = 1e-12.
 Its drift over 4 s is tiny (measured max |Φ| 6.3e-12 planar, 6.7e-12 spatial), and it agrees with
 the same integration at 1e-13 to 2.0e-11 / 3.5e-11 on the crank coordinates, so it resolves
 differences of 1e-9.

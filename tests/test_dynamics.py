@@ -168,7 +168,7 @@ def test_unknown_method_lists_the_valid_ones():
 
 @pytest.mark.parametrize("name", ["fourbar_spatial", "slider_crank"])
 def test_newton_euler_form_matches_the_euler_parameter_form(name):
-    """At a moving state, the Newton–Euler accelerations (002 §3.3) mapped back to θ̈ equal the
+    """At a moving state, the Newton–Euler accelerations (Rouvinen 2003, §3.3) mapped back to θ̈ equal the
     Euler-parameter form's q̈ (measured agreement 2e-14 on |q̈| ~ 8)."""
     from adapters.inhouse.dynamics import g_bar
     from adapters.inhouse.kinematics import assemble
@@ -246,7 +246,7 @@ def test_every_stabilisation_strategy_reaches_its_measured_accuracy(strategy):
 
 
 def test_geometric_elimination_energy_balance_on_the_independent_stick():
-    """The strategy drives its own Ψ = T + V − W − E₀ (002 eq. 128, from the in-house mass matrix
+    """The strategy drives its own Ψ = T + V − W − E₀ (Rouvinen 2003, eq. 128, from the in-house mass matrix
     and the Hermite-rule work of the generalised load power) to zero; the harness's stick
     (:func:`harness.measure.energy.energy_balance`, exact work τΔθ from body states) judges the result.
     Measured on the spatial four-bar, rk4, 1 s: 1.80e-4 J at dt 2e-3 and 1.22e-5 J at dt 1e-3

@@ -66,7 +66,7 @@ def test_phi_t_matches_finite_differences(mechanism):
 
 
 def test_gamma_matches_second_derivative_along_a_straight_motion(mechanism):
-    """Along q(s) = q + s·v, t = t0 + s (q̈ = 0): d²Φ/ds² = −γ (000 eq. 1.16)."""
+    """Along q(s) = q + s·v, t = t0 + s (q̈ = 0): d²Φ/ds² = −γ (Frączek & Wojtyra 2009, eq. 1.16)."""
     rng = np.random.default_rng(3)
     system = ConstraintSystem(mechanism, with_driver=True, drive=(0.3, 1.7))
     for _ in range(5):

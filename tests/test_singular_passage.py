@@ -38,7 +38,7 @@ def test_truncated_solve_is_the_minimum_norm_solution_without_the_lost_direction
 
 @pytest.mark.parametrize("name", ["fourbar", "slider_crank", "andrews"])
 def test_range_space_acceleration_equals_the_augmented_solve_off_singular_positions(name):
-    """Same q̈ as the LU of 002 eq. 77 at the start (planar and Euler-parameter scenes, Andrews'
+    """Same q̈ as the LU of Rouvinen 2003, eq. 77 at the start (planar and Euler-parameter scenes, Andrews'
     moments of 1e-7 kg·m²).  Measured largest relative difference: fourbar 3.8e-15, slider_crank
     4.3e-16, andrews 9.2e-14; bound 1e-10 (100x the worst; two factorisations of a matrix of
     condition up to ~1e9 on Andrews)."""

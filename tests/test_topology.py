@@ -1,4 +1,4 @@
-"""Tests of the topology layer: system graph, spanning tree, path matrix (seed 004)."""
+"""Tests of the topology layer: system graph, spanning tree, path matrix (Arczewski 1995)."""
 
 from __future__ import annotations
 
@@ -243,7 +243,7 @@ def test_angular_velocities_name_bad_shapes():
 @pytest.mark.parametrize("name", ["fourbar", "fourbar_spatial"])
 def test_angular_velocity_map_matches_inhouse_velocities(name):
     """Joint rates measured from an in-house velocity analysis, mapped through the path matrix
-    (seed 004 eq. 3/7), give back the in-house absolute angular velocities."""
+    (Arczewski 1995, eq. 3/7), give back the in-house absolute angular velocities."""
     from adapters.inhouse.constraints import layout_of
     from adapters.inhouse.kinematics import assemble
     from adapters.inhouse.states import body_states

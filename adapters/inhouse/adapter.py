@@ -65,7 +65,7 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
 
 
 class InhouseAdapter(Adapter):
-    """The project's own absolute-coordinate formulation (seeds 000 and 002)."""
+    """The project's own absolute-coordinate formulation (Frączek & Wojtyra 2009; Rouvinen 2003)."""
 
     name = "inhouse"
 

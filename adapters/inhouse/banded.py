@@ -276,7 +276,7 @@ def _indicator(positive, condition):
 
 @njit(cache=True)
 def min_norm_correction(matrix, rhs, cut, sparsity_arrays):
-    """Φ_q⁺ r of the projections (002 eq. 126) as :func:`~adapters.inhouse.linalg.min_norm_solve`
+    """Φ_q⁺ r of the projections (Rouvinen 2003, eq. 126) as :func:`~adapters.inhouse.linalg.min_norm_solve`
     does it, with the banded normal equations Aᵀ(AAᵀ)⁻¹ r for :data:`BANDED_MIN_ROWS` rows or
     more; ``matrix`` (m, n) has every row of ``sparsity_arrays``.  Shape (n,)."""
     return min_norm_correction_and_indicator(matrix, rhs, cut, sparsity_arrays)[0]

@@ -1,16 +1,16 @@
 """Body kinematics in absolute coordinates: points and vectors fixed in a body, their Jacobians
 with respect to the body's coordinates, and their velocity-squared acceleration terms.
 
-Two coordinate sets (seed 000 §1.2, seed 002 ch. 2):
+Two coordinate sets (Frączek & Wojtyra 2009, §1.2, Rouvinen 2003, ch. 2):
 
-* planar, ``NC = 3``: q_b = (x, y, φ); A(φ) the planar rotation; ∂(A ū)/∂φ = Ω A ū (000 eq. 1.19).
-* spatial, ``NC = 7``: q_b = (R, θ0..θ3) with Euler parameters; A(θ) of 002 eq. 5 written as
+* planar, ``NC = 3``: q_b = (x, y, φ); A(φ) the planar rotation; ∂(A ū)/∂φ = Ω A ū (Frączek & Wojtyra 2009, eq. 1.19).
+* spatial, ``NC = 7``: q_b = (R, θ0..θ3) with Euler parameters; A(θ) of Rouvinen 2003, eq. 5 written as
   A = (2θ0² − 1) I + 2(θ̄θ̄ᵀ + θ0 θ̃̄).  (The seed's eq. 5 prints the diagonal as
   2(θ2² + θ3²) − 1; with θᵀθ = 1 the correct entry is 1 − 2(θ2² + θ3²), which this form gives.)
 
 The Jacobians are the exact derivatives of these polynomial expressions, valid also off the
 normalisation manifold, so that they can be checked by finite differences anywhere.  On the
-manifold they equal the seed's −A ũ̄ Ḡ form (002 table 1, eq. 28).
+manifold they equal the seed's −A ũ̄ Ḡ form (Rouvinen 2003, table 1, eq. 28).
 
 The compiled kernels take these quantities as tuples (x, y, z) of scalars, not as arrays: a
 helper writing into a scratch array made every row of Φ_q and γ cost several times its arithmetic
@@ -67,14 +67,14 @@ def _with_origin(x, y, z, coordinates, nc, body):
 
 @njit(cache=True, inline="always")
 def point_xyz(q, nc, body, u):
-    """World position r_b + A_b ū of a body point as a tuple (x, y, z)  (002 eq. 1)."""
+    """World position r_b + A_b ū of a body point as a tuple (x, y, z)  (Rouvinen 2003, eq. 1)."""
     x, y, z = rotate_xyz(q, nc, body, u)
     return _with_origin(x, y, z, q, nc, body)
 
 
 @njit(cache=True, inline="always")
 def _planar_rotate_column(q, k, u):
-    """∂(A ū)/∂φ = Ω A ū (000 eq. 1.19) of the planar body whose coordinates start at q[k],
+    """∂(A ū)/∂φ = Ω A ū (Frączek & Wojtyra 2009, eq. 1.19) of the planar body whose coordinates start at q[k],
     a tuple (3)."""
     c, s = np.cos(q[k + 2]), np.sin(q[k + 2])
     return -s * u[0] - c * u[1], c * u[0] - s * u[1], 0.0
@@ -184,7 +184,7 @@ def rotate_quadratic_xyz(q, v, nc, body, u):
     """The part of d²(A_b ū)/dt² without q̈ as a tuple (x, y, z).
 
     Planar: −A ū φ̇².  Spatial: A(θ) is quadratic in θ, so the term is 2 A_q(θ̇) ū with
-    A_q(θ̇) = 2θ̇0² I + 2 θ̄̇θ̄̇ᵀ + 2 θ̇0 θ̄̇~ (equivalent to 002 eq. 31–33 on the manifold).
+    A_q(θ̇) = 2θ̇0² I + 2 θ̄̇θ̄̇ᵀ + 2 θ̇0 θ̄̇~ (equivalent to Rouvinen 2003, eq. 31–33 on the manifold).
     """
     if body < 0:
         return 0.0, 0.0, 0.0

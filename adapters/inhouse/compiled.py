@@ -6,12 +6,12 @@ The same arithmetic as the Python path (:func:`adapters.integrators.nystrom.nyst
 :class:`~adapters.inhouse.stabilisation.Formulation`), so the two agree to round-off: the stages
 of the tableau (c, A, Ā, b, b̄), each stage's q̈ from the fused right-hand side
 (:func:`~adapters.inhouse.dynamics.index1_acceleration`: mass matrix, forces, Φ_q, γ and the
-range-space solve of 002 eq. 77, with Baumgarte's γ − 2αΦ̇ − β²Φ of eq. 110), then for ``direct``
+range-space solve of Rouvinen 2003, eq. 77, with Baumgarte's γ − 2αΦ̇ − β²Φ of eq. 110), then for ``direct``
 the position projection (eq. 127, iterated to ``proj_tol``) and the velocity projection
 (eq. 137) with the truncated pseudo-inverse, then the divergence check of
 :meth:`adapters.integrators.base.Integrator.step`.
 
-Coordinate partitioning (:class:`~adapters.inhouse.partition.CoordinatePartitioning`, 002
+Coordinate partitioning (:class:`~adapters.inhouse.partition.CoordinatePartitioning`, Rouvinen 2003
 eq. 78–89) integrates the independent coordinates; every stage first recovers the dependent ones
 by Newton–Raphson (:func:`expand`), and before every step but the first the split is checked as
 the Python path checks it.  A step that needs a new split returns :data:`REPARTITION` to the
@@ -78,7 +78,7 @@ def _rows_jacobian(q, t, rows, constraint_args, counters):
 @njit(cache=True)
 def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, sparsity_arrays,
              generated, counters):
-    """Direct violation correction (002 eq. 127 and 137) with the truncated pseudo-inverse;
+    """Direct violation correction (Rouvinen 2003, eq. 127 and 137) with the truncated pseudo-inverse;
     the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project` (and its stop
     when an iteration no longer reduces max |Φ|).  Also returns the conditioning indicator ρ̂ of
     the corrected configuration (:func:`~adapters.inhouse.banded.conditioning_indicator`).
@@ -117,7 +117,7 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
 
 @njit(cache=True)
 def expand(q_ind, v_ind, t, rows, constraint_args, partition, counters):
-    """Full (q, q̇) from the independent (q_I, q̇_I) (002 eq. 80–84), as
+    """Full (q, q̇) from the independent (q_I, q̇_I) (Rouvinen 2003, eq. 80–84), as
     :meth:`~adapters.inhouse.partition.CoordinatePartitioning.expand` does it: Newton from the
     last solution moved along the sensitivity dq_D/dq_I, then q̇_D from it.
 

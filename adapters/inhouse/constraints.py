@@ -1,5 +1,5 @@
-"""The constraint library: joints composed of primitive constraints (seed 002 ch. 2, eq. 34–38;
-seed 000 eq. 1.35), and the coordinate layout of a mechanism in absolute coordinates.
+"""The constraint library: joints composed of primitive constraints (Rouvinen 2003, ch. 2, eq. 34–38;
+Frączek & Wojtyra 2009, eq. 1.35), and the coordinate layout of a mechanism in absolute coordinates.
 
 Joint compositions (spatial; ``h``, ``f`` are the two unit vectors perpendicular to the axis ``a``
 on a body, ``h`` = the joint normal, ``f = a × h``):

@@ -1,6 +1,6 @@
 """The equations of motion as a differential-algebraic system, solved by SUNDIALS IDA.
 
-Method ``ida`` integrates the constrained equations of motion in absolute coordinates (seed 002
+Method ``ida`` integrates the constrained equations of motion in absolute coordinates (Rouvinen 2003
 ch. 3, eq. 76) without reducing them to an ODE: the variable-order BDF of IDA (through
 scikit-sundae) solves the DAE in residual form F(t, y, ẏ) = 0.
 
@@ -16,7 +16,7 @@ y = (q, v, λ, μ) of length 2n + 2m::
 
 The extra multiplier μ projects q̇ onto the position manifold; it is zero on the exact solution.
 Position and velocity constraints both hold at every step, so there is no drift (the alternative
-to the stabilisations of seed 002 ch. 5).
+to the stabilisations of Rouvinen 2003, ch. 5).
 
 ``"index3"``, the plain form with y = (q, v, λ) of length 2n + m::
 
@@ -45,7 +45,7 @@ m = 8) kernels 2.9 s, ida 3.5 s; ``fourbar_spatial`` (n = 21, m = 21) kernels 3.
 
 Redundant constraint equations
 ------------------------------
-Only the independent rows of Φ_q(q0) (Gaussian elimination with full pivoting, seed 000 eq. 1.49)
+Only the independent rows of Φ_q(q0) (Gaussian elimination with full pivoting, Frączek & Wojtyra 2009, eq. 1.49)
 enter the DAE; redundant rows would make the iteration matrix singular.
 
 Counters
@@ -65,7 +65,7 @@ constraints", J. Comput. Appl. Math. 12–13 (1985) 77–90.
 K. E. Brenan, S. L. Campbell, L. R. Petzold, *Numerical Solution of Initial-Value Problems in
 Differential-Algebraic Equations*, SIAM 1996.
 A. Rouvinen, LUT research report 44 (2003), ch. 3 (equations of motion, eq. 76–77) and ch. 5
-(constraint stabilisation): seed 002.
+(constraint stabilisation): Rouvinen 2003.
 A. C. Hindmarsh et al., "SUNDIALS: Suite of nonlinear and differential/algebraic equation
 solvers", ACM TOMS 31 (2005) 363–396.
 """

@@ -5,7 +5,7 @@ Fixed-step methods are read after step round(t / dt).  Adaptive methods are read
 times: the state of the step that ends there, else the solver's dense output inside the last
 step.  Dense output is not a state the method carried when the formulation corrects the state
 after every step (``direct``, ``geometric``): it is then projected at each sample
-time (:meth:`InhouseStepper._carried`: the position projection of seed 002 eq. 127 and the
+time (:meth:`InhouseStepper._carried`: the position projection of Rouvinen 2003, eq. 127 and the
 velocity projection of eq. 137, the ``direct`` strategy's correction), so that the reported
 constraint violations and energies are those of states on the manifold the method keeps its steps
 on.  That projection is a reading, not part of the method: its cost is not counted, and the
@@ -32,7 +32,7 @@ _INTEGRATOR_COUNTERS = {"rhs_evals": "nfev", "jacobian_evals": "njev", "factoriz
 #: Note of an adaptive run whose dense-output samples are projected.
 PROJECTED_SAMPLES_NOTE = ("adaptive steps with projection: states between steps (dense output) "
                           "are projected onto the constraints at each sample time (positions "
-                          "002 eq. 127, velocities eq. 137); the projection is not counted")
+                          "Rouvinen 2003, eq. 127, velocities eq. 137); the projection is not counted")
 
 
 class FormulationStepper(Stepper):
@@ -165,7 +165,7 @@ class InhouseStepper(FormulationStepper):
         """(q, q̇) at ``t`` put back on the constraints; the formulation's counters are left as
         they were.
 
-        The position projection (002 eq. 127) of the formulation (``direct``, ``geometric``: the
+        The position projection (Rouvinen 2003, eq. 127) of the formulation (``direct``, ``geometric``: the
         only correcting ones), then the velocity projection q̇ − Φ_q⁺ Φ_q q̇ (eq. 137,
         minimum-norm least squares): ``geometric``'s own velocity correction integrates the work
         along the steps and cannot be replayed at a sample.

@@ -1,14 +1,14 @@
-"""Equations of motion in absolute coordinates (seed 002 ch. 3).
+"""Equations of motion in absolute coordinates (Rouvinen 2003, ch. 3).
 
 Planar: M = diag(m, m, I_zz) per body, no quadratic-velocity terms.
-Spatial with Euler parameters: per body M = diag(m I₃, Ḡᵀ J̄ Ḡ) (002 eq. 55–61, Ḡ = 2Ē of eq. 28)
+Spatial with Euler parameters: per body M = diag(m I₃, Ḡᵀ J̄ Ḡ) (Rouvinen 2003, eq. 55–61, Ḡ = 2Ē of eq. 28)
 and Q_v = (0, −Ḡᵀ(ω̄ × J̄ ω̄)) with ω̄ = Ḡ θ̇ (eq. 62–63, using Ḡ̇ θ̇ = 0).  The rotational block is
 singular along θ; the normalisation constraint θᵀθ = 1 completes the augmented system.
 
-Generalised forces (002 eq. 64–71): a world force F at body point ū gives Q_R = F,
+Generalised forces (Rouvinen 2003, eq. 64–71): a world force F at body point ū gives Q_R = F,
 Q_θ = Ḡᵀ(ū × AᵀF); a world torque n gives Q_θ = Ḡᵀ Aᵀ n.  Planar: Q_φ = (Aū × F)_z, n_z.
 
-The augmented system (002 eq. 76–77)
+The augmented system (Rouvinen 2003, eq. 76–77)
 
     [M   Φ_qᵀ] [q̈]   [Q_e + Q_v]
     [Φ_q  0  ] [λ] = [    γ    ]
@@ -33,13 +33,13 @@ from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mecha
 
 @njit(cache=True, inline="always")
 def g_bar(theta):
-    """Ḡ = 2Ē of 002 eq. 28, shape (3, 4): the array form of :func:`_g_bar_rows`."""
+    """Ḡ = 2Ē of Rouvinen 2003, eq. 28, shape (3, 4): the array form of :func:`_g_bar_rows`."""
     return np.array(_g_bar_rows(theta, 0))
 
 
 @njit(cache=True, inline="always")
 def _g_bar_rows(q, start):
-    """The rows of Ḡ = 2Ē (002 eq. 28) of θ = q[start:start + 4], three tuples (4): the form
+    """The rows of Ḡ = 2Ē (Rouvinen 2003, eq. 28) of θ = q[start:start + 4], three tuples (4): the form
     the force kernels use (tuples, not a scratch array: :mod:`adapters.inhouse.bodykin` says
     why)."""
     t0, t1, t2, t3 = q[start], q[start + 1], q[start + 2], q[start + 3]
@@ -106,7 +106,7 @@ def _euler_block_solve_into(out, i, start, rhs, theta, g, inertia_inverse, scale
     (:func:`_g_bar_rows`, :func:`_inverse_3x3_rows`), ``scales`` = :func:`_euler_block_scales`
     (θ, c), c > 0.
 
-    With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, 002 eq. 28; unit
+    With E = [Ḡ; θᵀ] (4, 4): Ḡθ = 0 and ḠḠᵀ = 4|θ|² I₃ for every θ (Ḡ = 2Ē, Rouvinen 2003, eq. 28; unit
     length is not needed), so E Eᵀ = D⁻¹ with D = diag(I₃ / (4|θ|²), 1/|θ|²), B = Eᵀ diag(J̄, c) E
     and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E: two products with E and one with J̄⁻¹, instead of
     assembling B and factorising it.
@@ -140,7 +140,7 @@ def _block_solve_into(out, i, k, x, mass, theta, g, inertia_inverse, scales):
 @njit(cache=True)
 def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind, bi, row,
                                sparsity_arrays, cut):
-    """q̈ of the augmented system (002 eq. 77) for Euler-parameter bodies with a block-diagonal
+    """q̈ of the augmented system (Rouvinen 2003, eq. 77) for Euler-parameter bodies with a block-diagonal
     mass matrix, every constraint row included.
 
     The rotational block Ḡᵀ J̄ Ḡ is singular along θ; the normalisation row 2θᵀθ̈ = γ_θ fixes
@@ -220,7 +220,7 @@ def _gram_of_rows(jac, weighted, row_columns, nc):
 
 @njit(cache=True)
 def _mass_matrix(q, nc, masses, inertias):
-    """M(q), shape (n, n) (002 eq. 55–61)."""
+    """M(q), shape (n, n) (Rouvinen 2003, eq. 55–61)."""
     n = q.shape[0]
     mass = np.zeros((n, n))
     for b in range(masses.shape[0]):
@@ -247,7 +247,7 @@ def planar_mass_diagonal(masses, inertias):
 
 @njit(cache=True, inline="always")
 def _inertial_forces(q, v, nc, masses, gravity, inertias):
-    """Q_v + gravity, shape (n,) (002 eq. 62–63).  Inlined into :func:`forces_kernel`, as is
+    """Q_v + gravity, shape (n,) (Rouvinen 2003, eq. 62–63).  Inlined into :func:`forces_kernel`, as is
     :func:`_applied_forces`: a call of a compiled function with this many array arguments cost
     ~0.06 µs, a tenth of the forces of a four-bar."""
     force = np.zeros(q.shape[0])
@@ -311,7 +311,7 @@ def _add_torque(out, q, nc, body, n, sign):
         out[k + 2] += sign * n[2]
         return
     # Ḡᵀ Aᵀ n: Aᵀ n = (2e₀² − 1) n + 2e (eᵀn) − 2e₀ (e × n) is the torque in body axes
-    # (002 eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
+    # (Rouvinen 2003, eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
     e0, e1, e2, e3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     scale, along = 2.0 * e0 * e0 - 1.0, 2.0 * (e1 * n[0] + e2 * n[1] + e3 * n[2])
     local = (scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
@@ -442,7 +442,7 @@ class Dynamics:
 
 @njit(cache=True)
 def solve_augmented(mass, jacobian, force, gamma):
-    """Solve the augmented system (002 eq. 77) by LU factorisation (LAPACK gesv).
+    """Solve the augmented system (Rouvinen 2003, eq. 77) by LU factorisation (LAPACK gesv).
 
     Returns
     -------
@@ -470,7 +470,7 @@ ACCELERATION_CUT = 1e-10
 
 @njit(cache=True)
 def range_space_acceleration(mass, jacobian, force, gamma, cut):
-    """q̈ of [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ] (002 eq. 77), solved in the range space with the
+    """q̈ of [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ] (Rouvinen 2003, eq. 77), solved in the range space with the
     constraint directions of vanishing conditioning left out.
 
     With M̃ = M + ρ Φ_qᵀΦ_q (positive definite also for Euler parameters, whose M is singular
@@ -563,7 +563,7 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
                         sparsity_arrays):
     """q̈ of the augmented index-1 form with Baumgarte terms, in one compiled call.
 
-    Solves [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ − 2αΦ̇ − β²Φ] on the constraint ``rows`` (002 eq. 77
+    Solves [M Φ_qᵀ; Φ_q 0][q̈; λ] = [Q; γ − 2αΦ̇ − β²Φ] on the constraint ``rows`` (Rouvinen 2003, eq. 77
     and 110; α = β = 0 is the unstabilised form) by :func:`range_space_acceleration`.
     ``constraint_args`` are :attr:`ConstraintSystem.kernel_args`, ``dynamics_args``
     :attr:`Dynamics.kernel_args`, ``sparsity_arrays`` :attr:`ConstraintSystem.sparsity`'s arrays:

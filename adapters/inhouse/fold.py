@@ -1,7 +1,7 @@
 """Passing a singular position with a placed step: no stage of a fixed-step method lands next to it.
 
 At a singular position (a fold or branch crossing of the constraint set: σ_min of Φ_q → 0) the
-index-1 acceleration (002 eq. 77) divides the stage state's small inconsistencies by σ_min: a
+index-1 acceleration (Rouvinen 2003, eq. 77) divides the stage state's small inconsistencies by σ_min: a
 stage that lands at a distance ψ from the crossing gets an acceleration error ~ ε/ψ, ε the
 state's constraint residual there.  With a fixed step the stages land wherever the grid puts them,
 and the smaller the step, the closer the closest one comes: measured on double_fourbar

@@ -89,9 +89,9 @@ def cache_directory() -> Path:
 #:
 #: * ACCELERATION — q̈ (n,) of :func:`~adapters.inhouse.dynamics.index1_acceleration`;
 #: * RESIDUAL_SIZE — max |Φ| over the formulation's rows, out[0];
-#: * POSITION_CORRECTION — q − Φ_q⁺Φ (n,), one iteration of the position projection (002 eq. 127,
+#: * POSITION_CORRECTION — q − Φ_q⁺Φ (n,), one iteration of the position projection (Rouvinen 2003, eq. 127,
 #:   :func:`~adapters.inhouse.banded.min_norm_correction`);
-#: * VELOCITY_CORRECTION — q̇ − Φ_q⁺Φ_q q̇ (n,) and ρ̂ in out[n], the velocity projection (002
+#: * VELOCITY_CORRECTION — q̇ − Φ_q⁺Φ_q q̇ (n,) and ρ̂ in out[n], the velocity projection (Rouvinen 2003
 #:   eq. 137) and the conditioning indicator of the placed passages
 #:   (:func:`~adapters.inhouse.banded.min_norm_correction_and_indicator`);
 #: * INDICATOR — ρ̂ alone, out[0] (:func:`~adapters.inhouse.banded.conditioning_indicator`).

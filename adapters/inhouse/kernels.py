@@ -1,22 +1,22 @@
 """Compiled constraint kernels: Φ, Φ_q, Φ_t and γ for a table of primitive constraints.
 
-Every joint of seed 002 ch. 2 is composed of a handful of primitives (see
+Every joint of Rouvinen 2003, ch. 2 is composed of a handful of primitives (see
 :mod:`adapters.inhouse.constraints`), stored row-wise in flat arrays so that one compiled loop
 evaluates the whole system:
 
 ==========  ====  ==========================================================================
 kind        rows  Φ
 ==========  ====  ==========================================================================
-POINT       2|3   p_i(ū_i) − p_j(ū_j)                          (C^s, 002 eq. 11; 000 eq. 1.35)
-DOT_VV      1     (A_i ā_i)ᵀ(A_j ā_j)                           (C^d1, 002 eq. 6–7)
-DOT_VD      1     (A_i ā_i)ᵀ(p_j(ū_j) − p_i(ū_i)) − c − δ·θ_d(t)   (C^d2, 002 eq. 8–10)
+POINT       2|3   p_i(ū_i) − p_j(ū_j)                          (C^s, Rouvinen 2003, eq. 11; Frączek & Wojtyra 2009, eq. 1.35)
+DOT_VV      1     (A_i ā_i)ᵀ(A_j ā_j)                           (C^d1, Rouvinen 2003, eq. 6–7)
+DOT_VD      1     (A_i ā_i)ᵀ(p_j(ū_j) − p_i(ū_i)) − c − δ·θ_d(t)   (C^d2, Rouvinen 2003, eq. 8–10)
 ANGLE       1     φ_j − φ_i − c − δ·θ_d(t)                      (planar rotation / driver)
-NORM        1     θ_iᵀθ_i − 1                                   (002 eq. 4)
+NORM        1     θ_iᵀθ_i − 1                                   (Rouvinen 2003, eq. 4)
 DRIVE_ROT   1     (A_i h̄_i)ᵀ A_j (sin θ_d f̄_j + cos θ_d ḡ_j) = sin(θ_d − θ)   (driven rotation)
 ==========  ====  ==========================================================================
 
 θ_d(t) = value + rate·t is the driver; δ = 1 on the driver row.  γ is the acceleration
-right-hand side Φ_q q̈ = γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt (000 eq. 1.16, 002 eq. 21–23).
+right-hand side Φ_q q̈ = γ = −(Φ_q q̇)_q q̇ − 2Φ_qt q̇ − Φ_tt (Frączek & Wojtyra 2009, eq. 1.16, Rouvinen 2003, eq. 21–23).
 
 Arrays (k primitives): ``kind, bi, bj, row, driver`` int64 (k,); ``ui, uj, pi, gj`` float64 (k, 3)
 (vectors or points on body i / j, the second point on i for DOT_VD, the second vector on j for
@@ -178,7 +178,7 @@ def phi_t(q, t, args):
 
 @njit(cache=True, inline="always")
 def gamma(q, v, t, args):
-    """Acceleration right-hand side γ(q, q̇, t), shape (m,)  (000 eq. 1.16; 002 eq. 21–23)."""
+    """Acceleration right-hand side γ(q, q̇, t), shape (m,)  (Frączek & Wojtyra 2009, eq. 1.16; Rouvinen 2003, eq. 21–23)."""
     nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m = args
     out = np.zeros(m)
     dim = 2 if nc == PLANAR_NC else 3

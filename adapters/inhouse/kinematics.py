@@ -1,5 +1,5 @@
 """Kinematic analysis in absolute coordinates: Newton–Raphson assembly from the driver value,
-velocity and acceleration analysis, and the rank report (seed 000 §1.1.2 and §1.3; seed 002
+velocity and acceleration analysis, and the rank report (Frączek & Wojtyra 2009, §1.1.2 and §1.3; Rouvinen 2003
 eq. 15–23).
 """
 
@@ -53,7 +53,7 @@ def _solve(matrix: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 def newton_raphson(system: ConstraintSystem, q0: np.ndarray, t: float = 0.0,
                    tol: float = ASSEMBLY_TOLERANCE, max_iter: int = ASSEMBLY_MAX_ITERATIONS):
-    """Solve Φ(q, t) = 0 from q0 by Newton–Raphson, Φ_q Δq = −Φ (000 eq. 1.21–1.30).
+    """Solve Φ(q, t) = 0 from q0 by Newton–Raphson, Φ_q Δq = −Φ (Frączek & Wojtyra 2009, eq. 1.21–1.30).
 
     Returns
     -------
@@ -96,7 +96,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
             f"{mech.source or mech.name}: the mechanism cannot be assembled with driver "
             f"{mech.initial.driver} = {value:g}: Newton–Raphson stopped after {iterations} "
             f"iterations at max |Φ| = {residual:.3g} (no configuration satisfies the constraints "
-            "there: check link lengths and the driver value; seed 000 example 1.9)")
+            "there: check link lengths and the driver value; Frączek & Wojtyra 2009, example 1.9)")
     jacobian = system.jacobian(q)
     v = _solve(jacobian, -system.phi_t(q))
     a = _solve(jacobian, system.gamma(q, v))
@@ -110,7 +110,7 @@ def common_start(mech: Mechanism) -> Assembly:
     (planar angles taken on the branch of :func:`reference_coordinates`, so that the prismatic
     angle rows see no 2π) and polishes it onto the in-house joint equations: Newton–Raphson on Φ
     without the driver (usually no iteration: the start already satisfies the neutral equations
-    to ~1e-15) and the minimum-norm velocity correction Φ_q⁺ Φ_q q̇ (002 eq. 137).  The driver
+    to ~1e-15) and the minimum-norm velocity correction Φ_q⁺ Φ_q q̇ (Rouvinen 2003, eq. 137).  The driver
     value and rate are the harness's; nothing here re-assembles from the driver.
 
     Raises

@@ -1,4 +1,4 @@
-"""The Newton–Euler form for spatial mechanisms (seed 002 §3.3, eq. 90–93).
+"""The Newton–Euler form for spatial mechanisms (Rouvinen 2003, §3.3, eq. 90–93).
 
 Velocities are the centre-of-mass velocity Ṙ and the angular velocity in body axes ω̄, six per
 body, so the mass matrix diag(m I, J̄) is constant and the quadratic-velocity term is the gyroscopic
@@ -8,7 +8,7 @@ commute, so the explicit methods step in the exponential chart around the curren
 (:mod:`adapters.integrators.nystrom`, "Lie groups"): :meth:`increment_rate`,
 :meth:`chart_velocity` and :meth:`chart_acceleration` are the chart's maps of
 :mod:`adapters.integrators.so3` for the rotations and the identity for the translations.  The constraint
-Jacobian with respect to (Ṙ, ω̄) is Φ_q T with θ̇ = ¼ Ḡᵀ ω̄ (Ḡ of 002 eq. 28), and the
+Jacobian with respect to (Ṙ, ω̄) is Φ_q T with θ̇ = ¼ Ḡᵀ ω̄ (Ḡ of Rouvinen 2003, eq. 28), and the
 acceleration right-hand side gains −Φ_θ ¼ Ḡ(θ̇)ᵀ ω̄ from differentiating that map.  Drift is held by
 Baumgarte terms (α, β; α = β = 0 gives the plain form).
 
@@ -27,7 +27,7 @@ from adapters.integrators import so3
 
 class NewtonEuler(Formulation):
     name = "newton-euler"
-    description = ("Newton–Euler form (002 §3.3): velocities (Ṙ, ω̄) per body, constant mass matrix, "
+    description = ("Newton–Euler form (Rouvinen 2003, §3.3): velocities (Ṙ, ω̄) per body, constant mass matrix, "
                    "θ advanced by the quaternion exponential; Baumgarte α, β (spatial only; explicit "
                    "one-step integrators)")
     defaults = {"alpha": 5.0, "beta": 5.0}

@@ -1,4 +1,4 @@
-"""Coordinate partitioning (Wehage–Haug; seed 002 §3.2, eq. 78–89).
+"""Coordinate partitioning (Wehage–Haug; Rouvinen 2003, §3.2, eq. 78–89).
 
 The coordinates split into independent ones q_I (as many as the mobility) and dependent ones q_D.
 Only (q_I, q̇_I) are integrated; at every evaluation the dependent coordinates are recovered by
@@ -7,7 +7,7 @@ Newton–Raphson on Φ(q_D; q_I) = 0 (eq. 80–82), their velocities from Φ_qD 
 to the Newton tolerance at every step, with no drift and no stabilisation parameter.
 
 The split comes from Gaussian elimination with full pivoting on Φ_qᵀ (the pivot columns of Φ_q are
-the dependent coordinates, seed 000 eq. 1.49) and is chosen again whenever the dependent block's
+the dependent coordinates, Frączek & Wojtyra 2009, eq. 1.49) and is chosen again whenever the dependent block's
 condition number exceeds ``cond_ratio`` times that of the split full pivoting would choose at the
 current configuration (checked after every step): an independent coordinate that reaches an
 extremum (the four-bar coupler's x, an Euler parameter, the slider at dead centre) makes the block
@@ -30,7 +30,7 @@ from adapters.inhouse.stabilisation import Formulation
 
 class CoordinatePartitioning(Formulation):
     name = "partition"
-    description = ("coordinate partitioning (002 eq. 78–89): integrate the independent "
+    description = ("coordinate partitioning (Rouvinen 2003, eq. 78–89): integrate the independent "
                    "coordinates, solve the dependent ones by Newton; re-partition when the "
                    "dependent block is cond_ratio times worse conditioned than the best split")
     defaults = {"newton_tol": 1e-13, "newton_max_iter": 20, "cond_ratio": 1.01, "passage": 1}

@@ -1,6 +1,6 @@
-"""Rank analysis of a constraint Jacobian (seed 000 §1.3).
+"""Rank analysis of a constraint Jacobian (Frączek & Wojtyra 2009, §1.3).
 
-* Grübler–Kutzbach mobility: w = 6n − Σ i·p_i (000 eq. 1.39), planar w = 3n − Σ (eq. 1.40).
+* Grübler–Kutzbach mobility: w = 6n − Σ i·p_i (Frączek & Wojtyra 2009, eq. 1.39), planar w = 3n − Σ (eq. 1.40).
 * Rank mobility: w = N − rank Φ_q(q0) (eq. 1.48), valid away from singular configurations.
 * Which equations are dependent: Gaussian elimination with full pivoting (eq. 1.49) on Φ_q; the
   rows never chosen as pivots are the redundant ones.
@@ -23,7 +23,7 @@ RANK_TOLERANCE = 1e-9
 
 @njit(cache=True)
 def full_pivot_elimination(matrix, tol=RANK_TOLERANCE):
-    """Gaussian elimination with full pivoting (000 eq. 1.49), compiled (the compiled
+    """Gaussian elimination with full pivoting (Frączek & Wojtyra 2009, eq. 1.49), compiled (the compiled
     partitioning path calls it after every step).
 
     Parameters
@@ -67,7 +67,7 @@ def full_pivot_elimination(matrix, tol=RANK_TOLERANCE):
 
 
 def grubler_mobility(mech: Mechanism) -> int:
-    """Chebyshev–Grübler–Kutzbach mobility (000 eq. 1.39 / 1.40)."""
+    """Chebyshev–Grübler–Kutzbach mobility (Frączek & Wojtyra 2009, eq. 1.39 / 1.40)."""
     if mech.planar:
         return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
     return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)

@@ -1,4 +1,4 @@
-"""Formulations and constraint stabilisations as interchangeable strategies (seed 002 ch. 3 and 5).
+"""Formulations and constraint stabilisations as interchangeable strategies (Rouvinen 2003, ch. 3 and 5).
 
 Each strategy is a second-order problem for :mod:`adapters.integrators`: it provides
 ``acceleration(t, q, v)`` (an index-1 form of the equations of motion) and ``project(t, q, v)``
@@ -7,7 +7,7 @@ Each strategy is a second-order problem for :mod:`adapters.integrators`: it prov
 ==============  =========================================================================
 name            method
 ==============  =========================================================================
-``none``        augmented form Φ_q q̈ = γ, no stabilisation (002 eq. 77)
+``none``        augmented form Φ_q q̈ = γ, no stabilisation (Rouvinen 2003, eq. 77)
 ``baumgarte``   γ* = γ − 2αΦ̇ − β²Φ (eq. 110); ``auto`` uses α = 1/Δt, β = √2/Δt (eq. 111)
 ``penalty``     (M + Φ_qᵀαΦ_q) q̈ = Q − Φ_qᵀα(−γ + 2ΩμΦ̇ + Ω²Φ) (eq. 115–116)
 ``auglag``      augmented Lagrangian, iterated to a tolerance (eq. 117–120)
@@ -19,7 +19,7 @@ name            method
 Coordinate partitioning (eq. 78–89) lives in :mod:`adapters.inhouse.partition`.
 
 A mechanism with redundant constraints keeps only the independent equations found by the rank
-analysis at the initial configuration (000 §1.3.2); its reaction split is then not unique.
+analysis at the initial configuration (Frączek & Wojtyra 2009, §1.3.2); its reaction split is then not unique.
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ class Formulation(SecondOrderSystem):
     gains = (0.0, 0.0)
 
     def acceleration(self, t, q, v):
-        """q̈ from the augmented system (002 eq. 77), one compiled call (:func:`index1_acceleration`)."""
+        """q̈ from the augmented system (Rouvinen 2003, eq. 77), one compiled call (:func:`index1_acceleration`)."""
         self.counters["jacobian_evals"] += 1
         self.counters["factorizations"] += 1
         return index1_acceleration(np.ascontiguousarray(q), np.ascontiguousarray(v), float(t),
@@ -215,12 +215,12 @@ class _Unprojected(Formulation):
 
 class NoStabilisation(_Unprojected):
     name = "none"
-    description = "augmented Lagrange-multiplier form, no stabilisation (002 eq. 77)"
+    description = "augmented Lagrange-multiplier form, no stabilisation (Rouvinen 2003, eq. 77)"
 
 
 class Baumgarte(_Unprojected):
     name = "baumgarte"
-    description = ("Baumgarte: γ − 2αΦ̇ − β²Φ (002 eq. 110); auto=true uses α = 1/Δt, "
+    description = ("Baumgarte: γ − 2αΦ̇ − β²Φ (Rouvinen 2003, eq. 110); auto=true uses α = 1/Δt, "
                    "β = √2/Δt (eq. 111)")
     defaults = {**_Unprojected.defaults, "alpha": 5.0, "beta": 5.0, "auto": False}
 
@@ -233,7 +233,7 @@ class Baumgarte(_Unprojected):
 
 class Penalty(Formulation):
     name = "penalty"
-    description = ("penalty formulation (002 eq. 115–116); penalty=0 means 1e7 × the largest "
+    description = ("penalty formulation (Rouvinen 2003, eq. 115–116); penalty=0 means 1e7 × the largest "
                    "mass-matrix entry")
     defaults = {"penalty": 0.0, "omega": 10.0, "mu": 1.0}
 
@@ -263,7 +263,7 @@ class Penalty(Formulation):
 
 class AugmentedLagrangian(Penalty):
     name = "auglag"
-    description = ("augmented Lagrangian (002 eq. 117–120): multipliers updated until the "
+    description = ("augmented Lagrangian (Rouvinen 2003, eq. 117–120): multipliers updated until the "
                    "accelerations change less than tol (relative)")
     defaults = {**Penalty.defaults, "al_tol": 1e-10, "al_max_iter": 50}
 
@@ -288,7 +288,7 @@ class AugmentedLagrangian(Penalty):
 
 
 class _Projection(Formulation):
-    """Position projection with the Moore–Penrose inverse, iterated (002 eq. 121–127).
+    """Position projection with the Moore–Penrose inverse, iterated (Rouvinen 2003, eq. 121–127).
 
     The pseudo-inverse is truncated (:func:`truncated_solve`): singular values of Φ_q below
     ``singular_cut`` × its conditioning at the start (σ_r/σ_1, r the rank there) × its largest
@@ -344,11 +344,11 @@ class _Projection(Formulation):
 
 
 class DirectCorrection(_Projection):
-    """Position (002 eq. 127) and velocity (eq. 137) projection after every step; ρ̂ for the
+    """Position (Rouvinen 2003, eq. 127) and velocity (eq. 137) projection after every step; ρ̂ for the
     placed passages comes from the velocity projection's Φ_q (no evaluation of its own)."""
 
     name = "direct"
-    description = "direct violation correction: position (002 eq. 127) and velocity (eq. 137) projection"
+    description = "direct violation correction: position (Rouvinen 2003, eq. 127) and velocity (eq. 137) projection"
     #: Newton to round-off (``proj_tol`` 1e-15; it stops earlier where an iteration no longer
     #: reduces max |Φ|): 1e-12 left rk8 1.6e-3 m off on double_fourbar (10 s, dt 1e-3, with
     #: placed passages; 7.8e-9 m at 1e-15) and rk5 5.3e-2 m (plain grid), at no measurable cost
@@ -366,7 +366,7 @@ class DirectCorrection(_Projection):
 
 
 class GeometricElimination(_Projection):
-    """Geometric elimination (002 eq. 127–136): position projection, then the velocity moved
+    """Geometric elimination (Rouvinen 2003, eq. 127–136): position projection, then the velocity moved
     along ∂Ψ/∂q̇ = M q̇ until the energy balance Ψ = T + V − W − E₀ vanishes (eq. 128, 136).
 
     Every term comes from this formulation's own model: T = ½ q̇ᵀ M(q) q̇ with the mass matrix of
@@ -382,7 +382,7 @@ class GeometricElimination(_Projection):
     """
 
     name = "geometric"
-    description = ("geometric elimination: position projection (002 eq. 127), then the energy-based "
+    description = ("geometric elimination: position projection (Rouvinen 2003, eq. 127), then the energy-based "
                    "velocity correction (eq. 128–136) with the work of applied loads integrated "
                    "over each step by the Hermite rule")
 

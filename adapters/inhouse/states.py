@@ -2,7 +2,7 @@
 
 Planar: (x, y, φ) ↔ position (x, y, 0), quaternion (cos φ/2, 0, 0, sin φ/2), ω = (0, 0, φ̇).
 Spatial: (R, θ) ↔ position R, quaternion θ (normalised), and ω = 2 E θ̇ with
-E = [−θ̄, θ̃̄ + θ0 I] (world axes; the world-frame counterpart of 002 eq. 28), inverted on the
+E = [−θ̄, θ̃̄ + θ0 I] (world axes; the world-frame counterpart of Rouvinen 2003, eq. 28), inverted on the
 manifold by θ̇ = ½ Eᵀ ω.
 """
 

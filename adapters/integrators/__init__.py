@@ -1,4 +1,4 @@
-"""The in-house integrator library for q̈ = a(t, q, v) (seed 002 ch. 4).
+"""The in-house integrator library for q̈ = a(t, q, v) (Rouvinen 2003, ch. 4).
 
 Methods are looked up by their literature name::
 

@@ -4,8 +4,8 @@ The in-house formulation reduces the equations of motion to a second-order ODE
 
     q̈ = a(t, q, v),   v = q̇,
 
-(seed 002 eq. 77 with a stabilisation, ch. 5) and may correct the state after each step (the
-direct violation correction, seed 002 eq. 137).  :class:`Integrator` is the common base of every
+(Rouvinen 2003, eq. 77 with a stabilisation, ch. 5) and may correct the state after each step (the
+direct violation correction, Rouvinen 2003, eq. 137).  :class:`Integrator` is the common base of every
 method in this package, modelled on ``scipy.integrate.OdeSolver``: its public
 :meth:`~Integrator.step` owns the time, the status and the cost counters and calls the private
 ``_step_impl`` of the method.
@@ -65,7 +65,7 @@ class SecondOrderProblem(Protocol):
         """q̈ = a(t, q, v), shape (n,)."""
 
     def project(self, t: float, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Post-step correction of ``(q, v)`` (e.g. seed 002 eq. 137); same shapes out."""
+        """Post-step correction of ``(q, v)`` (e.g. Rouvinen 2003, eq. 137); same shapes out."""
 
     def advance(self, q: np.ndarray, dq: np.ndarray) -> np.ndarray:
         """Position update q ⊕ dq, with ``dq`` a tangent vector of shape (n,)."""

@@ -1,5 +1,5 @@
 """Linear multistep methods: Adams–Bashforth, Adams–Moulton, Gear (BDF), and the AB–AM
-predictor–corrector (seed 002 §4.2).
+predictor–corrector (Rouvinen 2003, §4.2).
 
 All of them work on the first-order state y = (q, v), f(t, y) = (v, a(t, q, v)) (eq. 94), with the
 general form (eq. 107, normalised to α_0 = 1 and with the f terms moved to the right)
@@ -154,7 +154,7 @@ class LinearMultistep(MultistepIntegrator):
 
 
 class PredictorCorrector(MultistepIntegrator):
-    """PECE predictor–corrector (seed 002 fig. 15): predict with the explicit method
+    """PECE predictor–corrector (Rouvinen 2003, fig. 15): predict with the explicit method
     (``predictor`` = (α, β)), evaluate f there, correct once with the implicit method
     (``corrector``), and evaluate f at the corrected point (at the start of the next step).
     Two acceleration evaluations per step, no iteration.
@@ -196,20 +196,20 @@ GEAR_DEFAULTS = {"tol": 1e-10, "max_iter": 10}
 
 ADAMS_BASHFORTH_METHODS = [
     _method(LinearMultistep, f"AdamsBashforth{k}", f"ab{k}", k,
-            f"Adams–Bashforth, {k} step(s), order {k} (seed 002 table 2).",
+            f"Adams–Bashforth, {k} step(s), order {k} (Rouvinen 2003, table 2).",
             **dict(zip(("alpha", "beta"), adams_coefficients(*row, implicit=False))))
     for k, row in ADAMS_BASHFORTH.items()
 ]
 ADAMS_MOULTON_METHODS = [
     _method(LinearMultistep, f"AdamsMoulton{k}", f"am{k}", k,
-            f"Adams–Moulton of order {k} ({k - 1} past step(s); seed 002 table 3), Newton "
+            f"Adams–Moulton of order {k} ({k - 1} past step(s); Rouvinen 2003, table 3), Newton "
             "iteration to ``tol``.", defaults=ADAMS_MOULTON_DEFAULTS,
             **dict(zip(("alpha", "beta"), adams_coefficients(*row, implicit=True))))
     for k, row in ADAMS_MOULTON.items()
 ]
 GEAR_METHODS = [
     _method(LinearMultistep, f"Gear{p}", f"bdf{p}", p,
-            f"Gear's backward differentiation formula of order {p} (seed 002 table 4), Newton "
+            f"Gear's backward differentiation formula of order {p} (Rouvinen 2003, table 4), Newton "
             "iteration to ``tol`` with a re-used finite-difference Jacobian.",
             defaults=GEAR_DEFAULTS,
             **dict(zip(("alpha", "beta"), gear_coefficients(*row))))

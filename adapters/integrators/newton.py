@@ -1,6 +1,6 @@
 """Newton iteration for the implicit stage of the implicit multistep methods.
 
-An implicit linear multistep step (seed 002 eq. 107 with b_0 ≠ 0) on the first-order system
+An implicit linear multistep step (Rouvinen 2003, eq. 107 with b_0 ≠ 0) on the first-order system
 y = (q, v), f(t, y) = (v, a(t, q, v)) (eq. 94) asks for y_{n+1} solving
 
     r(y) = y − γ f(t_{n+1}, y) − ψ = 0,

@@ -35,7 +35,7 @@ q(t) = q_n ⊕ Θ(t) around the current point, where Θ lives in a vector space:
 * Symplectic Euler (order 1) keeps the plain composition, which is exact to O(h²) per step.
 
 A classical Runge–Kutta method (c, A, b) applied to the first-order system y = (q, v),
-f = (v, a) (seed 002 eq. 94) is the Nyström scheme with Ā = A·A and b̄ = b·A (substitute the
+f = (v, a) (Rouvinen 2003, eq. 94) is the Nyström scheme with Ā = A·A and b̄ = b·A (substitute the
 velocity stages into the position stages), so Euler (eq. 98), Heun (eqs. 99–101) and RK4
 (eqs. 102–106) share one implementation with the symplectic Euler and the Nyström RKN4 methods,
 and so do the fifth- and eighth-order Dormand–Prince formulas (RK5, RK8) that the adaptive RK45
@@ -305,7 +305,7 @@ class NystromIntegrator(Integrator):
 
 
 class Euler(NystromIntegrator):
-    """Explicit Euler, y_{n+1} = y_n + h f(t_n, y_n) (seed 002 eq. 98); order 1."""
+    """Explicit Euler, y_{n+1} = y_n + h f(t_n, y_n) (Rouvinen 2003, eq. 98); order 1."""
 
     name = "euler"
     order = 1
@@ -325,7 +325,7 @@ class SymplecticEuler(NystromIntegrator):
 
 
 class Heun(NystromIntegrator):
-    """Heun's method (improved Euler), seed 002 eqs. 99–101; order 2.
+    """Heun's method (improved Euler), Rouvinen 2003, eqs. 99–101; order 2.
 
     y_{n+1} = y_n + h/2 (k_1 + k_2) with k_1 = f(t_n, y_n), k_2 = f(t_n + h, y_n + h k_1).
     Eq. 99 prints ``(k_1 + 2 k_2)``, which is not even consistent (weights sum to 3/2); the
@@ -339,7 +339,7 @@ class Heun(NystromIntegrator):
 
 
 class RK4(NystromIntegrator):
-    """Classical fourth-order Runge–Kutta method, seed 002 eqs. 102–106; order 4."""
+    """Classical fourth-order Runge–Kutta method, Rouvinen 2003, eqs. 102–106; order 4."""
 
     name = "rk4"
     order = 4
@@ -350,7 +350,7 @@ class RK4(NystromIntegrator):
 
 
 class RKN4(NystromIntegrator):
-    """Classical fourth-order Runge–Kutta–Nyström method for q̈ = a(t, q, v) (seed 002 §4.1).
+    """Classical fourth-order Runge–Kutta–Nyström method for q̈ = a(t, q, v) (Rouvinen 2003, §4.1).
 
     The velocity-dependent form (E. Kreyszig, *Advanced Engineering Mathematics*, RKN method):
     with k_1 = h/2 a(t, q, v), K = h/2 (v + k_1/2), k_2 = h/2 a(t + h/2, q + K, v + k_1),
@@ -394,7 +394,7 @@ class RK8(NystromIntegrator):
     The 12-stage solution formula of DOP853 (E. Hairer, S. P. Nørsett, G. Wanner, *Solving
     Ordinary Differential Equations I*, 2nd ed., §II.10; P. J. Prince, J. R. Dormand, *High order
     embedded Runge–Kutta formulae*, J. Comput. Appl. Math. 7, 1981), without its error estimators
-    and step control: the explicit Runge–Kutta family of seed 002 §4 carried to a high order, for
+    and step control: the explicit Runge–Kutta family of Rouvinen 2003, §4 carried to a high order, for
     the accurate end of the front, where a step of 1e-2 s already reaches 1e-9 rad on the seed
     scenes.  The coefficients are SciPy's (``scipy.integrate.DOP853``'s ``C``, ``A``, ``B``).
 

@@ -5,7 +5,7 @@
 Pinocchio's proximal method with its Baumgarte corrector), ``advance`` is ``pin.integrate`` (the
 configuration stays on its manifold; :mod:`.stepping` adds the dexp⁻¹ map for trees with
 non-commutative joints), and ``project`` optionally pulls the state back onto the
-loop-closure manifold (seed 002 eq. 137: Gauss–Newton on the cut-joint residuals with Pinocchio's
+loop-closure manifold (Rouvinen 2003, eq. 137: Gauss–Newton on the cut-joint residuals with Pinocchio's
 constraint Jacobian, then a minimum-norm velocity projection).
 
 One factorisation per projection

@@ -1,4 +1,4 @@
-"""Energy bookkeeping from body states, as in the seed (002 ch. 7 setup): the energy-balance error
+"""Energy bookkeeping from body states, as in the seed (Rouvinen 2003, ch. 7 setup): the energy-balance error
 is e(t) = T + V − W − (T₀ + V₀), with T the kinetic energy, V the potential of gravity and of
 springs, and W the work of the other applied loads integrated along the motion.
 

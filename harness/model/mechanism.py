@@ -10,7 +10,7 @@ Frames and units (SI throughout)
 * Each body has a body frame at its centre of mass.  ``Body.position`` (m) and ``Body.rotation``
   (3×3, body → world) give that frame in the *reference configuration* drawn by the scenario.
 * Joint geometry is stored in body frames (``point1``/``axis1`` on ``body1``, ``point2``/``axis2``
-  on ``body2``), as in Rouvinen's table 6 (seed 002).  The scenario file writes it in world
+  on ``body2``), as in Rouvinen's table 6 (Rouvinen 2003).  The scenario file writes it in world
   coordinates at the reference configuration; the loader converts.
 * Ground is the world frame; its name is :data:`GROUND`.
 * Planar mechanisms move in the world x–y plane; their joint axes are +z.
@@ -28,7 +28,7 @@ GROUND = "ground"
 
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "universal", "cylindrical", "translational")
 PLANAR_JOINT_TYPES = ("revolute", "prismatic")
-#: Number of relative degrees of freedom each joint type removes in space (Grübler, 000 eq. 1.39)
+#: Number of relative degrees of freedom each joint type removes in space (Grübler, Frączek & Wojtyra 2009, eq. 1.39)
 #: and in the plane (eq. 1.40).
 SPATIAL_JOINT_CLASS = {
     "revolute": 5,
@@ -58,7 +58,7 @@ class Body:
     position : ndarray, shape (3,)
         Centre of mass in the reference configuration, world frame, m.
     rotation : ndarray, shape (3, 3)
-        Orientation A (body → world) in the reference configuration (seed 002 eq. 1).
+        Orientation A (body → world) in the reference configuration (Rouvinen 2003, eq. 1).
     """
 
     name: str
@@ -78,7 +78,7 @@ class Joint:
         ``type`` is one of :data:`JOINT_TYPES`.
     body1, body2 : str
     point1, point2 : ndarray, shape (3,)
-        Joint point in each body's frame, m (seed 002 ū in eq. 1).
+        Joint point in each body's frame, m (Rouvinen 2003: ū in eq. 1).
     axis1, axis2 : ndarray, shape (3,)
         Unit joint axis in each body's frame.  For ``universal`` they are the two cross axes
         (perpendicular in the reference configuration); otherwise they are the same world line.
@@ -128,7 +128,7 @@ class JointActuation:
 
 @dataclass(frozen=True)
 class SpringDamper:
-    """Point-to-point spring-damper (seed 002 §3.1.4 generalised forces).
+    """Point-to-point spring-damper (Rouvinen 2003, §3.1.4 generalised forces).
 
     ``stiffness`` N/m, ``damping`` N·s/m, ``free_length`` m; points in body frames.
     """
@@ -178,7 +178,7 @@ class InitialState:
     ``value`` is the driver joint's coordinate (rad or m) measured from the reference
     configuration; ``rate`` its time derivative.  ``guess`` maps body names to approximate centre
     positions (m, world) that replace the reference positions as the Newton start and so pick the
-    assembly branch (seed 000 §1.1.2, lesson on several solutions).  ``prescribed`` holds further
+    assembly branch (Frączek & Wojtyra 2009, §1.1.2, lesson on several solutions).  ``prescribed`` holds further
     velocity conditions at t = 0; together with ``rate`` they must be consistent with the
     constraints (the assembly checks it and refuses an inconsistent start).
     """

@@ -1,10 +1,10 @@
-"""Graph-theoretic description of a mechanism (seed 004, Arczewski 1995).
+"""Graph-theoretic description of a mechanism (Arczewski 1995).
 
 The *system graph* G of a mechanism has vertex 0 for the reference body (ground, the world frame)
 and vertices 1..n for the bodies in declaration order; its edges are the joints in declaration
 order, each oriented from its ``body1`` to its ``body2``.
 
-Sign conventions (seed 004 defers the definitions of S and P to Wittenburg 1977, its ref. [1])
+Sign conventions (Arczewski 1995 defers the definitions of S and P to Wittenburg 1977, its ref. [1])
 -----------------------------------------------------------------------------------------------
 * Incidence matrix Ŝ = [S0; S], shape (n + 1, n_joints): Ŝ[i, e] = +1 when edge e leaves vertex i
   (vertex i is the edge's ``body1``), −1 when it enters vertex i (its ``body2``), 0 otherwise.
@@ -49,7 +49,7 @@ SLIDING_JOINTS = ("prismatic", "translational")
 
 @dataclass(frozen=True, eq=False)
 class SystemGraph:
-    """The system graph G of a mechanism (seed 004 §2).
+    """The system graph G of a mechanism (Arczewski 1995, §2).
 
     Compared by identity (``eq=False``): the incidence array makes field-wise equality ambiguous.
 
@@ -151,7 +151,7 @@ def _vertex_row(mech: Mechanism, name: str) -> int:
 
 
 def incidence_matrix(mech: Mechanism) -> np.ndarray:
-    """The incidence matrix Ŝ = [S0; S] of the system graph (seed 004 §2).
+    """The incidence matrix Ŝ = [S0; S] of the system graph (Arczewski 1995, §2).
 
     Parameters
     ----------
@@ -415,7 +415,7 @@ def _as_rows(name: str, value, shape: tuple[int, ...]) -> np.ndarray:
 
 def angular_velocities(mech: Mechanism, tree: SpanningTree, joint_axes_world,
                        joint_rates) -> np.ndarray:
-    """Absolute angular velocities from joint rates, ground fixed (seed 004 eq. 3, ω0 = 0).
+    """Absolute angular velocities from joint rates, ground fixed (Arczewski 1995, eq. 3, ω0 = 0).
 
     Ω_b = Σ_e P[e, b] ω_e a_e over the rotating tree joints e, with P the tree's path matrix.
 

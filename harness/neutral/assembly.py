@@ -1,7 +1,7 @@
 """The neutral assembly: one consistent start for every engine (DESIGN.md rule 3).
 
 Positions: Newton–Raphson on the body poses with the neutral joint equations and the driver row
-(seed 000 eq. 1.21–1.30), from the reference configuration with ``initial.guess`` positions in
+(Frączek & Wojtyra 2009, eq. 1.21–1.30), from the reference configuration with ``initial.guess`` positions in
 place of the reference positions of the bodies it names (the guess picks the branch).  A step
 solves J Δ = −Φ in least squares (scipy.linalg.lstsq) for the body twists Δ = [Δr, Δθ]; positions
 move by Δr, rotations by the exponential map R ← exp(Δθ) R (scipy Rotation.from_rotvec).
@@ -239,7 +239,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
             f"{source}: the mechanism cannot be assembled with driver {driver} = {value:g}: "
             f"Newton–Raphson stopped after {iterations} iterations at max |residual| = "
             f"{worst:.3g} in row '{label}' (tolerance {tolerance:.1e}; no configuration satisfies "
-            "the constraints there: check link lengths and the driver value; seed 000 example 1.9)")
+            "the constraints there: check link lengths and the driver value; Frączek & Wojtyra 2009, example 1.9)")
 
     report = rank_analysis(mech, position, quaternion, drive=(value, rate))
     if report.singular:

@@ -1,7 +1,7 @@
 """The neutral model's accelerations at a consistent state: Newton–Euler in body twists with the
 joint equations of :mod:`harness.neutral.equations` as index-1 constraints.
 
-Equations (seed 002 §3: Newton–Euler equations with Lagrange multipliers; seed 000 eq. 1.62 for the
+Equations (Rouvinen 2003, §3: Newton–Euler equations with Lagrange multipliers; Frączek & Wojtyra 2009, eq. 1.62 for the
 acceleration-level constraint)
 ----------------------------------------------------------------------------------------------
 With every body's twist ν_b = [v_b, ω_b] (centre-of-mass velocity and angular velocity, world

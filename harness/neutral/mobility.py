@@ -1,6 +1,6 @@
-"""Rank analysis of the neutral joint equations at one configuration (seed 000 §1.3).
+"""Rank analysis of the neutral joint equations at one configuration (Frączek & Wojtyra 2009, §1.3).
 
-* Grübler–Kutzbach mobility: w = 6n − Σ (relative freedoms removed) in space (000 eq. 1.39),
+* Grübler–Kutzbach mobility: w = 6n − Σ (relative freedoms removed) in space (Frączek & Wojtyra 2009, eq. 1.39),
   w = 3n − Σ in the plane (eq. 1.40), from the joint classes of :mod:`harness.model.mechanism`.
 * Rank mobility: w = N − rank J (eq. 1.48) with J the Jacobian of the joint rows with respect to
   the body twists (N = 6 per spatial body, 3 per planar body; no Euler-parameter normalisation rows,
@@ -46,7 +46,7 @@ DEPENDENCE_TOLERANCE = 1e-9
 
 
 def grubler_mobility(mech: Mechanism) -> int:
-    """Chebyshev–Grübler–Kutzbach mobility (000 eq. 1.39 / 1.40)."""
+    """Chebyshev–Grübler–Kutzbach mobility (Frączek & Wojtyra 2009, eq. 1.39 / 1.40)."""
     if mech.planar:
         return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
     return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)

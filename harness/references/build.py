@@ -2,7 +2,7 @@
 
 A reference is the in-house formulation's most accurate configuration, computed by two routes on
 the same dense time grid, both the index-1 augmented form with direct position and velocity
-projection after every step (002 eq. 77, 127, 137) at Δt = 5e-5 s, integrated by two different
+projection after every step (Rouvinen 2003, eq. 77, 127, 137) at Δt = 5e-5 s, integrated by two different
 method families:
 
 * route A (:data:`ROUTE_A`): the classical Runge–Kutta RK4 on the first-order system;

@@ -21,7 +21,7 @@ branch is a smooth manifold, and two independent routes are well posed:
 * :func:`reduced_route` — one coordinate: the driver joint's coordinate θ (the scene must have
   mobility 1 on the branch).  q(θ) by Newton–Raphson on the joint, branch and driver rows; the
   twist per unit rate ν' = ∂ν/∂θ̇ and the acceleration at zero θ̈, a₀ θ̇², from the same rows
-  (G ν' = e_θ; G a₀ = γ(ν'), seed 000 eq. 1.62); the equation of motion projected on ν'
+  (G ν' = e_θ; G a₀ = γ(ν'), Frączek & Wojtyra 2009, eq. 1.62); the equation of motion projected on ν'
   (Kane's / the virtual-power form):  θ̈ = ν'ᵀ (Q − M a₀ θ̇²) / (ν'ᵀ M ν').  Integrated by DOP853.
 * :func:`full_route` — every body's pose and twist: the index-1 Newton–Euler equations of
   :mod:`harness.neutral.dynamics` with the branch rows among the constraints and Baumgarte's
