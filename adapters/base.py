@@ -46,6 +46,12 @@ DIVERGENCE_LIMIT = 1e8
 #: Relative tolerance of "an integer multiple of dt" (t_end, and sample times of fixed-step
 #: methods): |t − k·dt| ≤ GRID_RTOL · max(t, dt).
 GRID_RTOL = 1e-9
+#: The closure contract of the joint-coordinate engines (MuJoCo, Bullet, Pinocchio): each builder
+#: has ``closure_equations(mech: Mechanism, joint: Joint) -> int``, the number of constraint
+#: equations the engine closes a loop cut at ``joint`` with, or this value when it cannot close
+#: that joint at all; it is large, so a spanning tree
+#: (:func:`harness.model.topology.spanning_tree`) cuts such a joint only when it must.
+UNCLOSABLE = 1000
 
 
 class UnsupportedCase(Exception):
@@ -226,7 +232,7 @@ class Stepper(abc.ABC):
         """An engine-specific divergence check on top of :func:`divergence_reason` (None: fine)."""
         return None
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 — an optional hook: most steppers hold nothing
         """Release engine resources (called once, after the run)."""
 
     def run(self, grid: RunGrid, n_bodies: int) -> Trajectory:
@@ -259,7 +265,7 @@ class Stepper(abc.ABC):
             status, reason, failure_time = "diverged", str(error), last_good
         except RunFailure as error:
             status, reason, failure_time = error.status, error.reason, self._last_good(last_good)
-        except Exception as error:  # an engine failure is a result, not a crash (DESIGN rule 6)
+        except Exception as error:  # noqa: BLE001 — a failure is a result (design rule 6)
             status, reason, failure_time = "failed", describe(error), self._last_good(last_good)
         run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
                    read_back_s=read_back, steps=self.steps, counters=self.counters(),
@@ -425,7 +431,7 @@ class Adapter(abc.ABC):
             stepper = self._start(model, spec, params, grid)
         except UnsupportedCase as error:
             return Trajectory.empty(n_bodies, status="unsupported", reason=str(error))
-        except Exception as error:  # the engine refused the start: a result (DESIGN rule 6)
+        except Exception as error:  # noqa: BLE001 — a refused start is a result (rule 6)
             return Trajectory.empty(n_bodies, status="failed", reason=describe(error),
                                     failure_time=0.0)
         try:
@@ -441,7 +447,7 @@ class Adapter(abc.ABC):
         other exception makes the run ``failed`` at t = 0 with no samples.
         """
 
-    def _check_params(self, spec: MethodSpec, params: dict) -> None:
+    def _check_params(self, spec: MethodSpec, params: dict) -> None:  # noqa: B027 — optional hook
         """Raise a ValueError for resolved parameters the engine cannot take (default: none)."""
 
     def _fixed_step(self, spec: MethodSpec, params: dict) -> bool:

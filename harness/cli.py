@@ -16,6 +16,8 @@ import argparse
 import sys
 
 from harness.common import jsonout
+from harness.common.errors import MbhError
+from harness.common.numbers import format_number
 
 from harness.model import scenario
 from harness.model.scenario import ScenarioError
@@ -33,7 +35,7 @@ JSON_HELP = ('strict JSON on stdout; non-finite numbers as the strings "NaN", "I
              '"-Infinity"')
 
 
-class UserError(Exception):
+class UserError(MbhError):
     """A problem with the user's input; printed without a traceback."""
 
 
@@ -278,10 +280,6 @@ def cmd_run(args) -> int:
 BENCH_PARTS = ("front", "overhead", "scaling", "references")
 
 
-def _number(value, digits: int = 3) -> str:
-    return "-" if value is None else f"{value:.{digits}g}"
-
-
 def cmd_bench(args) -> int:
     """The speed figures of :mod:`harness.jobs.bench`, measured in this run, printed as tables."""
     from harness.jobs import bench
@@ -296,8 +294,9 @@ def cmd_bench(args) -> int:
     if "overhead" in parts:
         print("\nadapter time per step / bare loop time per step (dt 1e-3 s, 4 s, best of 5)")
         rows = bench.overhead_rows()
-        _print_table([{**r, **{k: _number(r[k]) for k in ("adapter_us_per_step", "bare_us_per_step",
-                                                          "ratio", "read_back_us_per_sample")}}
+        _print_table([{**r, **{k: format_number(r[k])
+                               for k in ("adapter_us_per_step", "bare_us_per_step", "ratio",
+                                         "read_back_us_per_sample")}}
                       for r in rows], ["adapter", "scenario", "method", "adapter_us_per_step",
                                        "bare_us_per_step", "ratio", "read_back_us_per_sample",
                                        "note"])
@@ -308,15 +307,16 @@ def cmd_bench(args) -> int:
         table = {}
         for row in rows:
             table.setdefault(row["adapter"], {"adapter": row["adapter"]})[f"N={row['N']}"] = \
-                _number(row["s_per_sim_s"]) if row["status"] == "ok" else row["status"]
+                format_number(row["s_per_sim_s"]) if row["status"] == "ok" else row["status"]
         for name, row in table.items():
-            row["exponent (N>=4)"] = _number(exponents[name])
+            row["exponent (N>=4)"] = format_number(exponents[name])
         _print_table(list(table.values()), ["adapter", *(f"N={n}" for n in members),
                                             "exponent (N>=4)"])
     if "references" in parts:
         print("\nreference build time per route, s (stored: when built; now: this run)")
         rows = bench.reference_rows()
-        _print_table([{**r, "stored_s": _number(r["stored_s"]), "now_s": _number(r["now_s"])}
+        _print_table([{**r, "stored_s": format_number(r["stored_s"]),
+                       "now_s": format_number(r["now_s"])}
                       for r in rows], ["scenario", "route", "stored_s", "now_s"])
     return 0
 
@@ -333,7 +333,7 @@ def _bench_front(args) -> None:
     for name in ("fourbar", "slider_crank"):
         table = front_ratio_table(cases, name)
         print(f"\n{table.caption}")
-        rows = [dict(zip(table.columns, (_number(v) if isinstance(v, float) else v
+        rows = [dict(zip(table.columns, (format_number(v) if isinstance(v, float) else v
                                          for v in row))) for row in table.rows]
         _print_table(rows, list(table.columns))
 

@@ -38,7 +38,8 @@ _ROTATIONS = ("ep", "rotvec")
 _GENALPHA_PARAMS = {"rho_inf": 0.9, **_COMMON_PARAMS}
 #: Newmark: Exudyn's default newmarkBeta/newmarkGamma (undamped trapezoidal rule), index 3.
 _NEWMARK_PARAMS = {"beta": 0.25, "gamma": 0.5, "index2": False, **_COMMON_PARAMS}
-#: The most accurate settings measured (see tests/test_exudyn_adapter.py), re-chosen 2026-11-25.
+#: The most accurate settings measured (see tests/adapters/exudyn/test_exudyn_adapter.py),
+#: re-chosen 2026-11-25.
 #: Rule: the smallest max |crank angle − verified reference| (the main output) in the most of the
 #: 8 cases fourbar, fourbar_spatial, slider_crank, slider_crank_planar × dt 1e-3, 1e-4 s over each
 #: scene's duration (4, 4, 8, 4 s), among candidates whose every one of those runs the measuring
@@ -72,7 +73,7 @@ _NEWMARK_PARAMS = {"beta": 0.25, "gamma": 0.5, "index2": False, **_COMMON_PARAMS
 #: lose digits in the index-3 Newton iteration: the start accelerations of generated mechanisms
 #: were measured 4.5e-3 m/s² off at 1e-5 s (the iteration stops at atol = 1e-12; 1e-14 cures
 #: that case) and 1.0e-4 relative off at 2e-5 s (not cured by atol), against ≤ 1.1e-5 at 2.5e-5 s
-#: (tests/test_generated_mechanisms.py).
+#: (tests/engines/test_generated_mechanisms.py).
 _BEST = {**_GENALPHA_PARAMS, "rtol": 1e-12, "atol": 1e-12, "modified_newton": False,
          "ignore_singular": True}
 

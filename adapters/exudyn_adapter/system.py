@@ -180,7 +180,7 @@ class ExudynSystem:
         return self.mbs.AddMarker(eii.MarkerBodyPosition(bodyNumber=self._object(body),
                                                          localPosition=list(point)))
 
-    def _frame_marker(self, body: str, point: np.ndarray, rotation=np.eye(3)):
+    def _frame_marker(self, body: str, point: np.ndarray, rotation=np.eye(3)):  # noqa: B008
         ht = exu.HT(rotation=np.asarray(rotation), translation=list(point))
         return self.mbs.AddMarker(eii.MarkerBodyRigid(bodyNumber=self._object(body), localHT=ht))
 
@@ -277,7 +277,7 @@ class ExudynSystem:
         try:
             success = solver.SolveSystem(self.mbs, settings)
             reason = "" if success else f"exudyn solver failed: {solver.GetErrorString()}"
-        except Exception as error:  # Newton failure etc. are results (DESIGN rule 6)
+        except Exception as error:  # noqa: BLE001 — Newton failures are results (rule 6)
             success, reason = False, _describe(error)
         if success:
             return _Run("ok", "", None, _counters(solver),

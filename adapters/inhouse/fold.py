@@ -4,9 +4,8 @@ At a singular position (a fold or branch crossing of the constraint set: σ_min 
 index-1 acceleration (Rouvinen 2003, eq. 77) divides the stage state's small inconsistencies by σ_min: a
 stage that lands at a distance ψ from the crossing gets an acceleration error ~ ε/ψ, ε the
 state's constraint residual there.  With a fixed step the stages land wherever the grid puts them,
-and the smaller the step, the closer the closest one comes: measured on double_fourbar
-(rk4+direct, proj_tol 1e-15, 10 s), the tip error grew from 9.7e-10 m at dt 1e-3 to 1.8e-8 m at
-1e-4, and rk5 and rk8 lost more.
+and the smaller the step, the closer the closest one comes: on the plain grid the error can grow
+as the step shrinks (figures in docs/measurements.md).
 
 So the step that passes a singular position is placed: the passage is predicted from the
 conditioning indicator ρ̂ (:func:`~adapters.inhouse.banded.conditioning_indicator`, ≈ σ_min/σ_max
@@ -28,26 +27,12 @@ same numbers, so the same steps); ``passage=0`` turns it off.  Coordinate partit
 in its re-partition check after each step and keeps its stages farther away (its own clearance,
 :attr:`~adapters.inhouse.partition.CoordinatePartitioning.passage_clearance`).
 
-Measured on double_fourbar (``best`` = rk4+direct, proj_tol 1e-15; tip error against its
-one-degree-of-freedom model, m; dt = 1e-2 / 1e-3 / 1e-4 / 1e-5 s):
-
-* first 1.5 s (two passages): placed 1.24e-7 / 1.21e-11 / 2.73e-12 / 2.26e-12, plain grid
-  1.23e-7 / 1.41e-11 / 4.02e-11 / 4.48e-11;
-* whole 10 s (ten passages; against the verified reference): placed 2.9e-6 / 1.6e-10 / 2.4e-10 /
-  2.2e-10, plain grid 3.1e-6 / 9.7e-10 / 1.8e-8 / 8.1e-9.  Between passages the crank creeps
-  over the top of its swing, an unstable position that multiplies an angle error 14–33-fold on
-  the way (from 1.23 s to 2.65 s, measured on the one-degree-of-freedom model): the ~1e-12 left
-  after a passage becomes the ~1e-10 floor of the 10 s runs.
-
-Per step it costs the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ (banded from
-:data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows), and for ``none`` and ``baumgarte`` the
-Φ_q it needs: rk4+direct 18.2 → 18.8 µs on fourbar, 55.3 → 56.9 µs on slider_crank
-(benchmarks/step_cost.py, before and after); rk4+baumgarte with passage=0 / 1 in one run
-(bare loop, dt 1e-3): 18.1 / 19.4 µs on fourbar, 53.1 / 57.9 µs on slider_crank.
-Measured with ``default`` (rk4+baumgarte) in the ``hard`` campaign (first 2 s, main output
-against the reference, dt 1e-2 / 1e-3 / 1e-4 s): double_fourbar 3.0e-6 / 2.9e-10 / 1.9e-12 m
-placed, 3.0e-6 / 3.0e-10 / 3.0e-8 m on the plain grid; parallelogram_fourbar 3.3e-6 / 3.0e-10 /
-1.8e-11 against 3.2e-6 / 3.0e-10 / 2.3e-4.
+With placed passages ``best`` converges through the passages of double_fourbar as the step
+shrinks, down to a floor set by the unstable motion between passages, not by the passages; the
+cost is a few per cent per step (the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ, banded
+from :data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows, and for ``none`` and ``baumgarte`` the
+Φ_q it needs).  Errors and timings, placed against the plain grid, with the commands that
+reproduce them: docs/measurements.md, "Placed steps through singular positions".
 """
 
 from __future__ import annotations
@@ -61,10 +46,7 @@ from numba import njit
 #: (a crossing, not the ordinary rise and fall of the conditioning along a motion).
 FOLD_ZONE = 0.1
 #: The ρ̂-distance from the crossing that the passage step keeps its stages at.  Chosen on
-#: parallelogram_fourbar (best, 10 s, largest error of its angle and tip outputs against the
-#: reference at dt 1e-2 / 1e-3 / 1e-4 / 1e-5 s): 3e-5 gave 2.3e-7 / 6.9e-11 / 2.5e-11 / 4.2e-11,
-#: 1e-4 gave 2.3e-7 / 6.9e-11 / 3.1e-11 / 1.2e-11.  (On double_fourbar, 10 s: 3e-5 gave 1.3e-10 / 5.4e-10 m at 1e-4 /
-#: 1e-5, 1e-5 gave 6.1e-10 / 4.7e-10 m.)
+#: parallelogram_fourbar and double_fourbar against 3e-5 and 1e-5 (docs/measurements.md).
 SAFE_INDICATOR = 1e-4
 
 

@@ -13,6 +13,7 @@ import scipy.linalg
 from adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
 from adapters.inhouse.rank import RankReport, rank_analysis
 from adapters.inhouse.states import coordinates
+from harness.common.errors import MbhError
 from harness.model.mechanism import Mechanism
 
 #: Assembly stops when max |Φ| falls below this (m, rad, or dimensionless).
@@ -20,8 +21,9 @@ ASSEMBLY_TOLERANCE = 1e-13
 ASSEMBLY_MAX_ITERATIONS = 50
 
 
-class AssemblyError(ValueError):
-    """The mechanism cannot be assembled at the requested driver value."""
+class InhouseAssemblyError(MbhError, ValueError):
+    """The in-house formulation cannot be assembled at the requested driver value, or the common
+    start does not satisfy its joint equations."""
 
 
 @dataclass(frozen=True)
@@ -83,7 +85,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
 
     Raises
     ------
-    AssemblyError
+    InhouseAssemblyError
         When Newton–Raphson does not reach :data:`ASSEMBLY_TOLERANCE`; the message names the
         mechanism, the driver value and the residual reached.
     """
@@ -92,7 +94,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
     system = ConstraintSystem(mech, with_driver=True, drive=(value, rate))
     q, residual, iterations, converged = newton_raphson(system, reference_coordinates(mech))
     if not converged:
-        raise AssemblyError(
+        raise InhouseAssemblyError(
             f"{mech.source or mech.name}: the mechanism cannot be assembled with driver "
             f"{mech.initial.driver} = {value:g}: Newton–Raphson stopped after {iterations} "
             f"iterations at max |Φ| = {residual:.3g} (no configuration satisfies the constraints "
@@ -104,7 +106,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
 
 
 def common_start(mech: Mechanism) -> Assembly:
-    """The harness's common start (DESIGN.md rule 3) in absolute coordinates.
+    """The harness's common start (docs/design.md, rule 3) in absolute coordinates.
 
     Every engine starts from :func:`harness.neutral.start.initial_state`; this converts it to (q, q̇)
     (planar angles taken on the branch of :func:`reference_coordinates`, so that the prismatic
@@ -115,7 +117,7 @@ def common_start(mech: Mechanism) -> Assembly:
 
     Raises
     ------
-    AssemblyError
+    InhouseAssemblyError
         When the polish does not converge (the two formulations' joint equations disagree).
     """
     from harness.neutral.start import initial_state
@@ -128,9 +130,9 @@ def common_start(mech: Mechanism) -> Assembly:
     system = ConstraintSystem(mech)
     q, residual, iterations, converged = newton_raphson(system, q)
     if not converged:
-        raise AssemblyError(f"{mech.source or mech.name}: the common start does not satisfy the "
-                            f"in-house joint equations (max |Φ| = {residual:.3g} after "
-                            f"{iterations} Newton–Raphson iterations)")
+        raise InhouseAssemblyError(
+            f"{mech.source or mech.name}: the common start does not satisfy the in-house joint "
+            f"equations (max |Φ| = {residual:.3g} after {iterations} Newton–Raphson iterations)")
     jacobian = system.jacobian(q)
     v = v - _solve(jacobian, jacobian @ v)
     a = _solve(jacobian, system.gamma(q, v))

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from adapters.inhouse.constraints import Layout
-from harness.model.trajectory import BodyStates, Trajectory
+from harness.model.trajectory import BodyStates
 
 
 def _e_matrix(theta: np.ndarray) -> np.ndarray:
@@ -63,15 +63,3 @@ def coordinates(layout: Layout, states: BodyStates) -> tuple[np.ndarray, np.ndar
     q = np.column_stack([states.position, theta])
     v = np.column_stack([states.velocity, theta_dot])
     return q.ravel(), v.ravel()
-
-
-def trajectory_from_coordinates(layout: Layout, times, q, v, **run) -> Trajectory:
-    """A Trajectory from sampled absolute coordinates q, q̇ of shape (k, n), converted at once.
-
-    ``run`` holds the Trajectory's status, cost and notes fields.
-    """
-    if len(times) == 0:
-        return Trajectory.empty(layout.n_bodies, **run)
-    states = body_states(layout, np.asarray(q), np.asarray(v))
-    return Trajectory(np.asarray(times, dtype=float), states.position, states.quaternion,
-                      states.velocity, states.angular_velocity, **run)

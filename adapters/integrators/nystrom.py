@@ -248,7 +248,7 @@ class NystromIntegrator(Integrator):
             return self.status
         t, q, v = self.t, self.q, self.v
         for t_new in ends:
-            new = self._checked(t_new, lambda: (t_new, *self._rule(t, q, v, t_new - t,
+            new = self._checked(t_new, lambda: (t_new, *self._rule(t, q, v, t_new - t,  # noqa: B023
                                                                     self.tableau)))
             if new is None:
                 return self.status
@@ -400,14 +400,11 @@ class RK8(NystromIntegrator):
 
     Through singular passages its error grows as the step shrinks: its twelve stages probe the
     configuration close to a fold, where the index-1 accelerations grow like the inverse of
-    Φ_q's smallest singular value.  Measured with ``direct`` (2026-11-25, first 2 s, error of the
-    main output against the verified reference, dt = 1e-2 / 1e-3 / 1e-4 s): on the plain grid
-    with proj_tol 1e-12, double_fourbar 7.7e-8 / 3.2e-2 / 2.8e-3 m (rk4: 1.0e-7 / 1.5e-11 /
-    1.5e-10), parallelogram_fourbar 2.9e-10 / 2.3e-7 / diverged at 1.08 s; with placed passages
-    (:mod:`adapters.inhouse.fold`) and proj_tol 1e-15, double_fourbar 1.1e-10 / 1.0e-10 / 2.6e-10
-    m, parallelogram_fourbar 1.1e-12 / 5.3e-12 / 9.5e-11.  Away from folds it is the most
-    accurate method per cost (Andrews' squeezer 4.7e-11 at 1e-4 s, where rk4 has 4.7e-6;
-    stiff_fourbar runs at 1e-3 s, where rk4 diverges).
+    Φ_q's smallest singular value.  On the plain grid it can lose to rk4 by orders of magnitude
+    there; placed passages (:mod:`adapters.inhouse.fold`) with proj_tol 1e-15 bring it back to
+    ~1e-10 m on double_fourbar.  Away from folds it is the most accurate method per cost.  The
+    figures and the commands that reproduce them: docs/measurements.md, "rk8 through singular
+    passages".
     """
 
     name = "rk8"

@@ -32,7 +32,7 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.base import UnsupportedCase
+from adapters.base import UNCLOSABLE, UnsupportedCase
 from adapters.mujoco_adapter.loads import _loads, _Loads
 from harness.model.mechanism import GROUND, Joint, Mechanism, SpringDamper
 from harness.model.topology import SpanningTree, spanning_tree
@@ -40,8 +40,6 @@ from harness.model.topology import SpanningTree, spanning_tree
 #: Smallest principal moment MuJoCo is given, relative to the body's largest (MuJoCo refuses a
 #: non-positive one; a slender bar has a zero moment about its own axis).
 INERTIA_FLOOR = 1e-9
-#: Cut-joint closure cost when MuJoCo cannot close the joint at all (never preferred).
-UNCLOSABLE = 1000
 _SLIDING = ("prismatic", "translational")
 _Z = np.array([0.0, 0.0, 1.0])
 

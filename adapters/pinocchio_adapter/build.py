@@ -32,12 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from adapters.base import UnsupportedCase
+from adapters.base import UNCLOSABLE, UnsupportedCase
 from harness.model.mechanism import GROUND, Body, Joint, JointActuation, Mechanism
 from harness.model.topology import SpanningTree, spanning_tree
 
-#: Closure cost of a joint type Pinocchio cannot close; large enough that a tree avoids it.
-NO_CLOSURE = 1000
 #: Distance (m) between the two point constraints that close a spatial revolute.
 AXIS_LEVER = 1.0
 
@@ -76,22 +74,27 @@ class PinocchioModel:
     notes: tuple[str, ...]
 
 
-def closure_equations(planar: bool):
-    """Closure cost per joint type for :func:`harness.model.topology.spanning_tree`.
+def closure_equations(mech: Mechanism, joint: Joint) -> int:
+    """Constraint equations Pinocchio needs to close a loop cut at ``joint``
+    (:data:`adapters.base.UNCLOSABLE`).
 
     Parameters
     ----------
-    planar : bool
-        Whether the mechanism is planar (a revolute closes with one point constraint).
+    mech : Mechanism
+        Whether it is planar decides a revolute cut: one point constraint, or two.
+    joint : Joint
 
     Returns
     -------
-    callable
-        ``cost(joint) -> int``: equations Pinocchio needs to close a cut at ``joint``,
-        :data:`NO_CLOSURE` when it has no constraint for that joint type.
+    int
+        3 per point constraint; :data:`UNCLOSABLE` when Pinocchio has no constraint for that
+        joint type.
     """
-    costs = {"spherical": 3, "revolute": 3 if planar else 6}
-    return lambda joint: costs.get(joint.type, NO_CLOSURE)
+    if joint.type == "spherical":
+        return 3
+    if joint.type == "revolute":
+        return 3 if mech.planar else 6
+    return UNCLOSABLE
 
 
 def build_model(mech: Mechanism) -> PinocchioModel:
@@ -110,9 +113,9 @@ def build_model(mech: Mechanism) -> PinocchioModel:
     UnsupportedCase
         If a joint that Pinocchio cannot close with a rigid constraint must be cut.
     """
-    tree = spanning_tree(mech, closure_equations(mech.planar))
+    tree = spanning_tree(mech, lambda joint: closure_equations(mech, joint))
     unclosable = [name for name in tree.cut_joints
-                  if closure_equations(mech.planar)(mech.joint(name)) == NO_CLOSURE]
+                  if closure_equations(mech, mech.joint(name)) == UNCLOSABLE]
     if unclosable:
         kinds = ", ".join(f"{name} ({mech.joint(name).type})" for name in unclosable)
         raise UnsupportedCase(f"every spanning tree of {mech.name!r} cuts a joint Pinocchio's "

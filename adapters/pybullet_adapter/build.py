@@ -24,13 +24,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.base import UnsupportedCase
+from adapters.base import UNCLOSABLE, UnsupportedCase
 from adapters.pybullet_adapter.quiet import pybullet
 from harness.model.mechanism import GROUND, Joint, Mechanism
 from harness.model.topology import SpanningTree, spanning_tree
 
-#: Closure cost of a cut joint type Bullet cannot close on a multibody (never chosen if avoidable).
-_UNCLOSABLE = 1000
 #: Equations of one ``JOINT_POINT2POINT`` user constraint.
 _POINT2POINT_EQUATIONS = 3
 
@@ -126,19 +124,16 @@ class PybulletModel:
     size: float
 
 
-def closure_equations(mech: Mechanism):
-    """The closure-cost function of :func:`harness.model.topology.spanning_tree` for Bullet.
+def closure_equations(mech: Mechanism, joint: Joint) -> int:
+    """Constraint equations Bullet needs to close a loop cut at ``joint``
+    (:data:`adapters.base.UNCLOSABLE`).
 
     Spherical cuts and planar revolute cuts take one point-to-point constraint (3 equations);
-    Bullet offers no multibody constraint for the other joint types (:data:`_UNCLOSABLE`).
+    Bullet offers no multibody constraint for the other joint types (:data:`UNCLOSABLE`).
     """
-
-    def cost(joint: Joint) -> int:
-        if joint.type == "spherical" or (mech.planar and joint.type == "revolute"):
-            return _POINT2POINT_EQUATIONS
-        return _UNCLOSABLE
-
-    return cost
+    if joint.type == "spherical" or (mech.planar and joint.type == "revolute"):
+        return _POINT2POINT_EQUATIONS
+    return UNCLOSABLE
 
 
 def _principal_axes(inertia: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -204,10 +199,9 @@ def _layout(mech: Mechanism, tree: SpanningTree) -> tuple[list[_Link], list[int]
 
 def _check_cuts(mech: Mechanism, tree: SpanningTree) -> None:
     """Raise :class:`UnsupportedCase` for a cut joint Bullet cannot close."""
-    cost = closure_equations(mech)
     for name in tree.cut_joints:
         joint = mech.joint(name)
-        if cost(joint) >= _UNCLOSABLE:
+        if closure_equations(mech, joint) == UNCLOSABLE:
             raise UnsupportedCase(f"cut joint {name!r} is {joint.type}: a Bullet multibody closes "
                                   "loops only with point-to-point constraints here (spherical, "
                                   "planar revolute)")
@@ -241,7 +235,7 @@ def _size(mech: Mechanism) -> float:
 
 def build_model(mech: Mechanism) -> PybulletModel:
     """Lay out ``mech`` as a Bullet multibody; raises :class:`UnsupportedCase` with a reason."""
-    tree = spanning_tree(mech, closure_equations(mech))
+    tree = spanning_tree(mech, lambda joint: closure_equations(mech, joint))
     _check_cuts(mech, tree)
     links, body_links, tree_joints = _layout(mech, tree)
     axes = [_principal_axes(np.asarray(body.inertia, dtype=float)) for body in mech.bodies]

@@ -43,15 +43,16 @@ def _create_multibody(model: PybulletModel, client: int) -> int:
     return pybullet.createMultiBody(
         baseMass=0.0, baseCollisionShapeIndex=-1, baseVisualShapeIndex=-1,
         basePosition=[0.0, 0.0, 0.0], baseOrientation=[0.0, 0.0, 0.0, 1.0],
-        linkMasses=[0.0 if l.body < 0 else model.mechanism.bodies[l.body].mass for l in links],
+        linkMasses=[0.0 if link.body < 0 else model.mechanism.bodies[link.body].mass
+                    for link in links],
         linkCollisionShapeIndices=[-1] * len(links), linkVisualShapeIndices=[-1] * len(links),
-        linkPositions=[list(l.origin - o) for l, o in zip(links, origins)],
+        linkPositions=[list(link.origin - o) for link, o in zip(links, origins)],
         linkOrientations=[[0.0, 0.0, 0.0, 1.0]] * len(links),
         linkInertialFramePositions=[pos for pos, _ in inertial],
         linkInertialFrameOrientations=[orn for _, orn in inertial],
-        linkParentIndices=[l.parent + 1 for l in links],
-        linkJointTypes=[l.joint_type for l in links],
-        linkJointAxis=[list(l.axis) for l in links],
+        linkParentIndices=[link.parent + 1 for link in links],
+        linkJointTypes=[link.joint_type for link in links],
+        linkJointAxis=[list(link.axis) for link in links],
         physicsClientId=client,
     )
 

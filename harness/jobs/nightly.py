@@ -35,7 +35,8 @@ import pandas as pd
 from harness.run.spec import load_campaign
 from harness.run.campaign import CaseWork, run_campaign
 from harness.store.compare import compare_runs
-from harness.store.runs import RunStore, list_runs
+from harness.store.runs import RunStore, latest_run
+from harness.common.numbers import format_number
 
 #: Default campaign of ``mbh nightly``.
 DEFAULT_CAMPAIGN = "nightly"
@@ -108,13 +109,6 @@ def regressions_of(changes: pd.DataFrame) -> pd.DataFrame:
     return changes[changes["change"].isin(REGRESSIONS)]
 
 
-def previous_run(campaign_name: str, root=None) -> str | None:
-    """The latest ``complete`` run of campaign ``campaign_name`` under ``root``, or None."""
-    runs = [m for m in list_runs(root)
-            if m["campaign"] == campaign_name and m["status"] == "complete"]
-    return runs[-1]["run_id"] if runs else None
-
-
 def build_reports(store: RunStore, previous: str | None, root, formats) -> tuple[dict, str]:
     """The run's reports in ``<run folder>/report/``, and a note on what happened.
 
@@ -135,10 +129,6 @@ def build_reports(store: RunStore, previous: str | None, root, formats) -> tuple
     return written, "report written: " + ", ".join(str(p) for p in written.values())
 
 
-def _number(value) -> str:
-    return "-" if value is None or pd.isna(value) else f"{value:.3g}"
-
-
 def regression_lines(changes: pd.DataFrame) -> list[str]:
     """One Markdown table row per regression: case, change, statuses, error and time ratios
     (the ``|`` of case ids escaped, as tables need)."""
@@ -146,8 +136,9 @@ def regression_lines(changes: pd.DataFrame) -> list[str]:
     for row in changes.itertuples(index=False):
         case = row.case_id.replace("|", "\\|")
         lines.append(f"| `{case}` | {row.change} | {row.status_a} → {row.status_b} | "
-                     f"{_number(row.main_output_error_a)} → {_number(row.main_output_error_b)} "
-                     f"(×{_number(row.error_ratio)}) | ×{_number(row.time_ratio)} |")
+                     f"{format_number(row.main_output_error_a)} → "
+                     f"{format_number(row.main_output_error_b)} "
+                     f"(×{format_number(row.error_ratio)}) | ×{format_number(row.time_ratio)} |")
     return lines
 
 
@@ -214,7 +205,7 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
         if not value > 1:
             raise ValueError(f"the {name} must be above 1, got {value!r}")
     campaign = load_campaign(campaign_name)
-    previous = previous_run(campaign.name, root)
+    previous = latest_run(campaign.name, root, statuses=("complete",))
     started = time.monotonic()
     store = run_campaign(campaign, workers=workers, root=root, quiet=quiet,
                          work=case_work(campaign))

@@ -1,4 +1,4 @@
-"""The seed's comparison, run the seed's way (Rouvinen 2003, ch. 7 setup as digested in SEEDS.md):
+"""The seed's comparison, run the seed's way (Rouvinen 2003, ch. 7 setup):
 integrators RK4, RKN4 and 4th-order Gear (iteration tolerance 1e-5) × stabilisation none /
 Baumgarte α = β = 5 / direct violation correction, fixed step Δt = 0.01 s, the four-bar for 4 s and
 the slider-crank for 8 s.  Reported per case: maximum and mean constraint violation (m: the

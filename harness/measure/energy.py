@@ -16,14 +16,14 @@ a quadrature of order :data:`QUADRATURE_DEGREE` + 1 in the sample spacing h for 
 any increasing sample times.  Measured on cos(ωt) sampled every h = 10 ms over 4 s, the largest
 error of the running integral relative to its amplitude 1/ω is 2.7e-14 at hω = 0.1, 4.5e-11 at
 0.2 and 2.3e-8 at 0.4 (the trapezoidal rule, used before: (hω)²/12 ≈ 8e-4 at 0.1); on a damped
-spring–mass (tests/test_energy.py) 4.2e-13 of the largest kinetic energy at 10 ms.
+spring–mass (tests/measure/test_energy.py) 4.2e-13 of the largest kinetic energy at 10 ms.
 
 A fast passage that the samples do not resolve still costs accuracy (a four-bar with a damper
 through a near-toggle passage: 5e-8 to 5e-5 at 10 ms).  Given a reference on a denser grid,
 :func:`energy_balance` therefore takes the reference's work, integrated on its own grid, and
 integrates only the difference of the powers at the samples (a control variate): measured on the
 same scene, 5.7e-13 (planar) and 5.8e-11 (spatial) of the largest kinetic energy
-(tests/test_metrics.py).
+(tests/measure/test_metrics.py).
 
 :func:`interval_work` is the two-state version for a stepper that only holds the previous and the
 current state: exact for the same loads, the trapezoidal rule (second order) for the others.

@@ -1,4 +1,4 @@
-"""One measuring stick for every adapter (DESIGN.md rule 2): errors against the reference,
+"""One measuring stick for every adapter (docs/design.md, rule 2): errors against the reference,
 constraint violations through the neutral model's own joint equations, and the energy balance,
 all computed from the body states a Trajectory reports.
 """

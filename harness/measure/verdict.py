@@ -1,4 +1,4 @@
-"""The measuring stick's verdict on a run (DESIGN.md rule 5: ``ok`` is a promise).
+"""The measuring stick's verdict on a run (docs/design.md, rule 5: ``ok`` is a promise).
 
 An adapter's own status says only that its integrator did not give up.  After every run the
 harness judges the returned :class:`~harness.model.trajectory.Trajectory` the same way for every adapter
@@ -67,7 +67,7 @@ import numpy as np
 from harness.measure.branch import BranchCheck, branch_distance, markers
 from harness.measure.energy import energy_balance, energy_scale
 from harness.measure.metrics import violation_series
-from harness.model.mechanism import GROUND, Mechanism, characteristic_length
+from harness.model.mechanism import Mechanism, characteristic_length
 from harness.model.outputs import rotation_between
 from harness.model.timegrid import TIME_MATCH, reference_indices
 from harness.model.trajectory import Trajectory
@@ -143,16 +143,6 @@ DEFAULT_BOUNDS = Bounds()
 #: The main-output error (rad or m) below which a case counts as accurate when a campaign does not
 #: set its own ``accuracy``.
 DEFAULT_ACCURACY = 1e-6
-
-
-def joint_points(mech: Mechanism) -> list[tuple[int, np.ndarray]]:
-    """(body index, point in the body frame, m) of every joint point on a moving body."""
-    points = []
-    for joint in mech.joints:
-        for body, point in ((joint.body1, joint.point1), (joint.body2, joint.point2)):
-            if body != GROUND:
-                points.append((mech.body_index(body), np.asarray(point, dtype=float)))
-    return points
 
 
 def joint_violations(mech: Mechanism, trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:

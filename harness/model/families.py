@@ -16,6 +16,8 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from harness.common.errors import MbhError
+
 #: Largest accepted N: 2N + 1 bodies; beyond a few hundred the dense in-house kernels and the
 #: reference build are out of reach anyway.
 _LARGEST_N = 256
@@ -44,7 +46,7 @@ and over, passing the flattened configuration (cranks horizontal, rank Φ_q drop
 """
 
 
-class FamilyError(ValueError):
+class FamilyError(MbhError, ValueError):
     """A family member that cannot be generated: unknown family or bad parameter."""
 
 

@@ -3,7 +3,7 @@
 A :class:`Mechanism` is what a scenario file describes once validated: rigid bodies with their
 centroidal inertia, joints between pairs of bodies (``ground`` allowed), applied forces, the initial
 driver state, the duration and the named outputs.  Every adapter, the in-house formulation
-included, builds its model from this object alone (DESIGN.md rule 1).
+included, builds its model from this object alone (docs/design.md, rule 1).
 
 Frames and units (SI throughout)
 --------------------------------

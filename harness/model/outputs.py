@@ -1,4 +1,4 @@
-"""Named outputs computed from body states through the neutral model (DESIGN.md rule 2).
+"""Named outputs computed from body states through the neutral model (docs/design.md, rule 2).
 
 Joint coordinates are measured from the joints' body-frame geometry: the rotation of a revolute or
 cylindrical joint is the angle from ``h = A₁ n̄₁`` to ``f = A₂ n̄₂`` about ``a = A₁ ā₁``

@@ -4,98 +4,8 @@ The validator walks the whole file, collects every problem with its field path a
 :class:`ScenarioError` listing them all (the sympy.physics.mechanics style), so a user fixes a file
 in one pass.  Nothing here raises anything else for bad input.
 
-File format (all SI; angles in degrees only where the key says ``_deg``)::
-
-    kind = "planar"               # or "spatial"
-    plane = "xy"                  # planar only
-    duration = 4.0                # s
-    sample_step = 0.01            # optional, s: the evaluation grid's spacing (default 0.01), a
-                                  # multiple of the reference grid's 1 ms (harness/model/timegrid.py)
-    gravity = [0.0, -9.81, 0.0]   # m/s², world
-    tags = ["seed"]
-    notes = "free text: sources, typos found in them"
-
-    [[bodies]]                    # centre-of-mass frame, reference configuration
-    name = "crank"
-    mass = 78.1
-    inertia = [Ixx, Iyy, Izz]     # or [Ixx, Iyy, Izz, Ixy, Ixz, Iyz], kg·m², body frame;
-                                  # slender bar: [1/12, 0, 1/12] (see "Inertia" below)
-    position = [x, y, z]
-    angle_deg = 60.0              # planar; spatial: euler313_deg = [ψ, θ, φ] or quaternion = [w, x, y, z]
-
-    [[joints]]
-    name = "O"
-    type = "revolute"             # revolute prismatic spherical universal cylindrical translational
-    body1 = "ground"
-    body2 = "crank"
-    location = [0, 0, 0]          # world, reference configuration
-    location2 = [...]             # optional: body2's point when the drawing is not assembled
-    axis = [0, 0, 1]              # world; universal: body1's cross axis
-    axis2 = [...]                 # universal: body2's cross axis
-    normal = [...]                # optional: perpendicular giving the zero of the joint angle
-
-    [[forces]]
-    type = "joint_torque"         # joint_torque joint_force body_force body_torque spring_damper
-    joint = "O"
-    value = -1200.0
-
-    [initial]
-    driver = "O"                  # a revolute, cylindrical, prismatic or translational joint
-    value = 0.0                   # rad or m from the reference configuration
-    rate = 0.0                    # rad/s or m/s
-    guess = { coupler = [x, y, z] }   # optional Newton start: picks the assembly branch
-
-    [[initial.velocities]]        # optional, any number: further velocities prescribed at t = 0
-    joint = "B"                   # a joint coordinate rate (drivable joint types, not the driver)
-    rate = 0.5                    # rad/s or m/s
-
-    [[initial.velocities]]
-    body = "crank"                # a body point's world velocity
-    location = [0.0, 1.0, 0.0]    # world, reference configuration (like joint locations)
-    velocity = [1.0, 0.0, 0.0]    # m/s, world
-    components = ["x"]            # optional, default all three (planar: x and y); the others
-                                  # are left to the constraints
-
-    [reference]                   # optional: what the reference routes may assume
-    equal_joint_angles = [["O1", "O2"], ["O1", "O3"]]   # joints that turn by equal angles on the
-                                  # assembly branch the motion stays on (harness/references/routes.py)
-    routes = "neutral"            # optional: the neutral DOP853 routes of harness/references/routes.py
-                                  # (implied by equal_joint_angles), not the in-house RK4/RKN4 ones
-
-    [outputs]
-    crank_angle = { kind = "joint_angle", joint = "O" }
-    beta = { kind = "joint_angle", joint = "O", offset = -0.0617 }   # rad added: an absolute angle
-    slider_x = { kind = "position", body = "slider", component = "x" }
-    tip_x = { kind = "point_position", body = "crank", location = [0.0, 1.0, 0.0], component = "x" }
-    tip_vy = { kind = "point_velocity", body = "crank", location = [0.0, 1.0, 0.0],
-               component = "y" }
-
-Outputs: ``joint_angle``, ``joint_rate`` (rad, rad/s) and ``joint_position`` (m) name a joint;
-a ``joint_angle`` may add a constant ``offset`` (rad, default 0), e.g. the angle's value in the
-reference configuration, so that the output is a publication's absolute angle;
-``position`` and ``velocity`` name a moving body (not ground) and a component of its centre of
-mass; ``point_position`` and ``point_velocity`` also take ``location``, a world point in the
-reference configuration that the loader converts to the body frame (p̄ = Aᵀ(location − r)), and
-report ``r + A p̄`` or ``v + ω × A p̄``.  ``component`` defaults to ``"x"``.
-
-Inertia: the tensor must be symmetric positive definite and satisfy the triangle inequality
-(each principal moment at most the sum of the other two), or describe a slender bar: exactly one
-principal moment zero (about the bar's axis) and the other two equal and positive, i.e. the
-triangle inequality holding with equality.  Zero means below 1e-12 of the trace.  Negative
-moments, two zero moments and a violated triangle inequality are rejected.  How each engine treats
-a zero moment is the adapter's business and is stated in its case notes.
-
-Prescribed velocities: ``initial.rate`` and every ``[[initial.velocities]]`` entry are velocity
-conditions at t = 0; with the constraints they must determine one consistent state.  The assembly
-checks them and refuses an inconsistent or insufficient start; the loader only checks that each
-names a known joint or body, a valid point and valid components.
-
-Limits: every number is finite (``nan`` and ``inf`` are rejected) and at most 1e100 in
-magnitude; masses and the duration are at least 1e-100.  The engines multiply up to three such
-numbers (m·v², I·ω², r × F), and 1e100³ stays inside the double range.  Names (of the scenario,
-bodies, joints, springs and outputs) are printable — no control or format characters such as a
-right-to-left override or a zero-width space — and not padded with whitespace; markup and emoji
-are fine.  In a planar scene every point (locations, prescribed velocities) lies in z = 0.
+The file format (sections, fields, units, defaults, limits, an example) is documented in
+``docs/formats/scenario.md``.
 """
 
 from __future__ import annotations
@@ -132,6 +42,7 @@ from harness.model.mechanism import (
 )
 from harness.model.families import FamilyError, family_document, family_names
 from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
+from harness.common.errors import MbhError
 
 SCENARIO_DIR = Path(__file__).resolve().parents[2] / "scenarios"
 
@@ -180,7 +91,7 @@ class Problem:
         return f"{self.file}: {self.field}: {self.message}"
 
 
-class ScenarioError(ValueError):
+class ScenarioError(MbhError, ValueError):
     """Raised once per file with every :class:`Problem` found."""
 
     def __init__(self, problems: list[Problem]):

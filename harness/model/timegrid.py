@@ -3,7 +3,7 @@
 Every error figure (outputs against the reference, constraint violations, energy balance) is
 taken on one grid per scenario, whatever step a case uses, so maxima for different dt compare
 like with like.  The grid is every :data:`EVALUATION_STEP` from 0 to the end time: 10 ms, the
-seed's own step (Rouvinen's Δt = 0.01 s, SEEDS.md) and a multiple of the reference grid step
+seed's own step (Rouvinen 2003, ch. 7: Δt = 0.01 s) and a multiple of the reference grid step
 (1 ms), so every sample lands on a reference sample.  Sampling every 10 ms resolves the seed's
 motions (fastest body 69 rad/s: 0.69 rad per sample, below the π that unwrapping angles needs).
 A faster scene declares a finer ``sample_step`` (``Mechanism.sample_step``, a multiple of 1 ms):

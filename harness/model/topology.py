@@ -341,8 +341,8 @@ def _greedy_cut(mech: Mechanism, costs: list[int]) -> tuple[int, ...]:
     ground nearest to ground first (with equal costs this builds a breadth-first tree, whose
     depth is the least any spanning tree has: criterion 2), then later names first (so that the
     earlier names are left to be cut: criterion 3).  Verified equal to the
-    exhaustive choice on every shipped scene and on n_fourbar@1…6 (tests/test_topology.py) and,
-    once, on n_fourbar@8 (17.5 s of enumeration against 0.2 ms).
+    exhaustive choice on every shipped scene and on n_fourbar@1…6
+    (tests/model/test_topology.py) and, once, on n_fourbar@8 (17.5 s of enumeration against 0.2 ms).
     """
     levels = _levels(mech)
 

@@ -1,4 +1,4 @@
-"""Body-state trajectories: what every adapter returns (DESIGN.md data flow).
+"""Body-state trajectories: what every adapter returns (docs/design.md, data flow).
 
 All arrays are in the world frame.  Quaternions are scalar-first ``[w, x, y, z]`` and rotate body
 vectors into the world (the Euler parameters θ0..θ3 of Rouvinen 2003, eq. 3).

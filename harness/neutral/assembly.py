@@ -1,4 +1,4 @@
-"""The neutral assembly: one consistent start for every engine (DESIGN.md rule 3).
+"""The neutral assembly: one consistent start for every engine (docs/design.md, rule 3).
 
 Positions: Newton–Raphson on the body poses with the neutral joint equations and the driver row
 (Frączek & Wojtyra 2009, eq. 1.21–1.30), from the reference configuration with ``initial.guess`` positions in
@@ -28,6 +28,7 @@ from harness.neutral.equations import JointEquations, body_twists, point_velocit
 from harness.model.mechanism import DRIVABLE, Mechanism, PrescribedJointRate, PrescribedPointVelocity
 from harness.neutral.mobility import CONDITION_LIMIT, RankReport, rank_analysis
 from harness.model.trajectory import BodyStates
+from harness.common.errors import MbhError
 
 #: Newton stops, and a start is accepted, when max |residual| ≤ this × max(1, L), in m or rad, with
 #: L (m) the mechanism's size (largest |coordinate| of a reference position or joint point).  The
@@ -47,7 +48,7 @@ POLISH_STEPS = 2
 VELOCITY_TOLERANCE = 1e-9
 
 
-class AssemblyError(ValueError):
+class AssemblyError(MbhError, ValueError):
     """The mechanism cannot be started at the requested driver state; the message names the
     scenario file, the driver and the numbers."""
 

@@ -106,7 +106,8 @@ def applied_wrenches(mech: Mechanism, states: BodyStates) -> np.ndarray:
     rotations = body_rotations(states.quaternion)
     wrench = np.zeros((len(mech.bodies) + 1, 2, 3))  # last row: ground, discarded
 
-    def push(body: int, force: np.ndarray, arm: np.ndarray, torque=np.zeros(3)) -> None:
+    def push(body: int, force: np.ndarray, arm: np.ndarray,
+             torque=np.zeros(3)) -> None:  # noqa: B008 (read only)
         wrench[body, 0] += force
         wrench[body, 1] += np.cross(arm, force) + torque
 

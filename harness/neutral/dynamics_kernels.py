@@ -5,8 +5,9 @@ sixth-order central difference, the uniqueness check, the equilibrated KKT least
 and :func:`harness.neutral.assembly.newton_positions` (the reduced route's poses), for one state, on the
 compiled joint equations of :mod:`harness.neutral.equation_kernels`.  Only the order of the floating-point
 operations differs (the KKT system by its symmetric eigendecomposition instead of gelsd's SVD,
-the same cut-off); ``tests/test_reference_speed.py`` checks them against the numpy originals and
-the stored references.  Nothing here imports the in-house formulation (DESIGN.md, boundaries).
+the same cut-off); ``tests/neutral/test_reference_speed.py`` checks them against the numpy
+originals and the stored references.  Nothing here imports the in-house formulation
+(docs/design.md, Layers).
 
 Load table (:class:`BodyTable`): ``kind`` (L,) one of the ``_LOAD_*`` codes, ``bodies`` (L, 2),
 ``vectors`` (L, 3, 3), ``scalars`` (L, 3) (see :func:`_add_loads`).

@@ -3,8 +3,8 @@ velocity residuals of :mod:`harness.neutral.equations`, with the joint rows flat
 numeric table (:class:`RowTable`), for the right-hand sides of :mod:`harness.neutral.dynamics_kernels`.
 
 Only the order of the floating-point operations differs from the numpy originals
-(``tests/test_reference_speed.py`` compares them).  Nothing here imports the in-house
-formulation (DESIGN.md, boundaries).
+(``tests/neutral/test_reference_speed.py`` compares them).  Nothing here imports the in-house
+formulation (docs/design.md, Layers).
 
 Row table: one entry per joint-equation row, in :class:`~harness.neutral.equations.JointEquations`
 order: ``kind`` (m,) one of the ``_ROW_*`` codes, ``bodies`` (m, 2) body indices (−1: ground),

@@ -1,4 +1,4 @@
-"""The neutral model's own joint equations, evaluated on world body states (DESIGN.md rule 2).
+"""The neutral model's own joint equations, evaluated on world body states (docs/design.md, rule 2).
 
 Written from the joint definitions of :class:`harness.model.mechanism.Joint` alone (points, axes and normals
 in body frames); the in-house kernels are an independent second implementation, and the two are

@@ -1,4 +1,4 @@
-"""The one start every engine shares (DESIGN.md rule 3): the assembled, checked, consistent state
+"""The one start every engine shares (docs/design.md, rule 3): the assembled, checked, consistent state
 produced once by the harness's neutral kinematics (:mod:`harness.neutral.assembly`)."""
 
 from __future__ import annotations

@@ -58,6 +58,7 @@ from harness.neutral.dynamics_kernels import (body_table, branch_acceleration, b
                                      full_rates, mass_spread)
 from harness.model.outputs import wrap_angle
 from harness.model.trajectory import BodyStates, Trajectory
+from harness.common.errors import MbhError
 
 #: DOP853 tolerance of both routes (relative and absolute, on θ in rad and θ̇ in rad/s, or on
 #: positions in m, quaternions and twists).
@@ -67,7 +68,7 @@ ROUTE_TOLERANCE = 1e-13
 FULL_ROUTE_BAUMGARTE = (20.0, 20.0)
 
 
-class BranchRouteError(ValueError):
+class BranchRouteError(MbhError, ValueError):
     """The scene cannot be followed along its branch (no relations, wrong mobility, Newton
     failed); the message says which and where."""
 

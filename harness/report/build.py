@@ -31,7 +31,8 @@ from harness.report.summary import Table
 from harness.model.scenario import ScenarioError
 from harness.measure.verdict import DEFAULT_ACCURACY
 from harness.store.compare import compare_runs
-from harness.store.runs import RunStore, list_runs
+from harness.store.runs import RunStore, latest_run
+from harness.common.errors import MbhError
 
 #: Output formats :func:`build_report` writes.
 FORMATS = ("html", "pdf")
@@ -53,7 +54,7 @@ _REPO = Path(__file__).resolve().parent.parent.parent
 _TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 
-class ReportError(ValueError):
+class ReportError(MbhError, ValueError):
     """A report that cannot be built as asked (unknown run, bad format); the message says why."""
 
 
@@ -122,18 +123,6 @@ def parse_formats(text: str) -> tuple[str, ...]:
                           f"separated by commas" + (f" (unknown: {', '.join(unknown)})"
                                                     if unknown else ""))
     return formats
-
-
-def previous_run(run_id: str, root: Path | None = None) -> str | None:
-    """The latest run of the same campaign started before ``run_id`` and not still running, or
-    None when there is none."""
-    manifests = list_runs(root)
-    mine = next((m for m in manifests if m["run_id"] == run_id), None)
-    if mine is None:
-        return None
-    earlier = [m for m in manifests if m["campaign"] == mine["campaign"]
-               and m["started"] < mine["started"] and m["status"] != "running"]
-    return earlier[-1]["run_id"] if earlier else None
 
 
 def build_time() -> str:
@@ -401,7 +390,7 @@ def build_report(run_id: str, against: str | None = None, formats=FORMATS,
     ----------
     run_id, against : str
         The run, and the previous run to compare with (None: no comparison; ``"previous"``:
-        :func:`previous_run`).
+        :func:`harness.store.runs.latest_run` of the campaign before ``run_id``).
     formats : iterable of str
         Any of :data:`FORMATS`.
     out, root : Path, optional
@@ -416,8 +405,8 @@ def build_report(run_id: str, against: str | None = None, formats=FORMATS,
     """
     formats = tuple(formats)
     if against == "previous":
-        _open(run_id, root)
-        against = previous_run(run_id, root)
+        campaign = _open(run_id, root).manifest["campaign"]
+        against = latest_run(campaign, root, before=run_id)
     report = collect(run_id, against, root, built_at)
     out = Path(out) if out is not None else reports_root() / run_id
     out.mkdir(parents=True, exist_ok=True)

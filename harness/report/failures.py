@@ -21,7 +21,6 @@ driven coordinate stops determining the others, is not a near-singular position 
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 from collections.abc import Callable
@@ -40,6 +39,7 @@ from harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure, app
                                   is_missing, new_figure, outcome, plain, render)
 from harness.report.summary import Table
 from harness.model.scenario import ScenarioError
+from harness.common.numbers import as_float, float_or_nan
 
 #: Scenario tag that puts a scene into the section.
 HARD_TAG = "hard"
@@ -134,18 +134,9 @@ def _tried_text(tried) -> str:
         runs = json.loads(tried) if isinstance(tried, str) else []
     except json.JSONDecodeError:
         return str(tried)
-    return ", ".join(f"{dt:.3g} {status}" + ("" if status != "ok" or _number(error) is None
-                                             else f" ({_number(error):.2g})")
+    return ", ".join(f"{dt:.3g} {status}" + ("" if status != "ok" or as_float(error) is None
+                                             else f" ({as_float(error):.2g})")
                      for dt, status, error in runs)
-
-
-def _number(value) -> float | None:
-    """A finite float from a stored value (None, NaN and the string "NaN" → None)."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        return None
-    return number if math.isfinite(number) else None
 
 
 def stable_steps_table(sweeps: pd.DataFrame, scenario: str) -> Table:
@@ -205,7 +196,7 @@ def _stopped(frame: pd.DataFrame) -> pd.DataFrame:
     """Cases that ran and stopped at a known time, by failure time."""
     if frame.empty:
         return frame
-    times = frame["failure_time"].map(lambda v: math.nan if is_missing(v) else float(v))
+    times = frame["failure_time"].map(float_or_nan)
     chosen = frame[frame["status"].isin(STOPPED) & np.isfinite(times)]
     return chosen.assign(_t=times[chosen.index]).sort_values(["_t", "case_id"], kind="stable")
 

@@ -22,9 +22,10 @@ from harness.neutral.equations import JointEquations
 from harness.measure.metrics import lever_length, violation_series
 from harness.model.mechanism import Mechanism
 from harness.model.outputs import output_series
+from harness.common.numbers import float_or_nan
 from harness.neutral.mobility import independent_rows
 from harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
-                                  apply_style, is_missing, new_figure, no_data, outcome, plain,
+                                  apply_style, new_figure, no_data, outcome, plain,
                                   render, series_style)
 from harness.model.timegrid import reference_indices
 from harness.model.trajectory import Trajectory
@@ -45,11 +46,6 @@ OUTPUT_UNITS = {"joint_angle": "rad", "joint_rate": "rad/s", "joint_position": "
 #: Fraction of the axes kept for points drawn at an edge (the shaded bands).
 _BAND = 0.08
 _FAILURE_COLOUR = "#D55E00"
-
-
-def _number(value) -> float:
-    """A float from a frame cell (None and NA → NaN)."""
-    return math.nan if is_missing(value) else float(value)
 
 
 def _scenario_rows(frame: pd.DataFrame, scenario: str, columns: tuple[str, ...],
@@ -103,8 +99,8 @@ def pareto_front(cases: pd.DataFrame, y: str = "main_output_error") -> pd.DataFr
     """
     if cases.empty:
         return cases
-    time = cases["wall_time_s"].map(_number)
-    value = cases[y].map(_number)
+    time = cases["wall_time_s"].map(float_or_nan)
+    value = cases[y].map(float_or_nan)
     mask = (cases["status"] == "ok") & (time > 0) & np.isfinite(time) & (value > 0) \
         & np.isfinite(value)
     candidates = cases[mask].assign(_t=time[mask], _v=value[mask]).sort_values(
@@ -150,7 +146,7 @@ def work_precision(cases: pd.DataFrame, scenario: str, y: str = "main_output_err
                                              y), "work_precision cases")
     if frame.empty:
         return no_data(title, f"no cases of scenario {scenario}")
-    frame = frame.assign(_t=frame["wall_time_s"].map(_number), _v=frame[y].map(_number))
+    frame = frame.assign(_t=frame["wall_time_s"].map(float_or_nan), _v=frame[y].map(float_or_nan))
     places = [_placement(s, t, v) for s, t, v in zip(frame["status"], frame["_t"], frame["_v"])]
     frame = frame.assign(_where=[p[0] for p in places], _label=[p[1] for p in places])
     series = sorted(set(zip(frame["adapter"], frame["method"])))
@@ -172,8 +168,8 @@ def work_precision(cases: pd.DataFrame, scenario: str, y: str = "main_output_err
                               textcoords="offset points", xytext=(3, 3), fontsize=6.5,
                               color=style["color"])
         if len(front):
-            axes.step(front["wall_time_s"].map(_number), front[y].map(_number), where="post",
-                      color="black", alpha=0.3, linewidth=4.0, zorder=1.5,
+            axes.step(front["wall_time_s"].map(float_or_nan), front[y].map(float_or_nan),
+                      where="post", color="black", alpha=0.3, linewidth=4.0, zorder=1.5,
                       solid_capstyle="round", label="Pareto front")
         edge_handles = _edge_points(axes, frame, colours)
         _set_work_precision_limits(axes, frame)
@@ -359,7 +355,7 @@ def _mark_sweeps(axes, sweep: pd.DataFrame, rows: list, columns: list) -> dict:
     stable = {}
     for case in sweep.itertuples():
         i = rows.index((case.adapter, case.method))
-        dt = _number(case.largest_stable_dt)
+        dt = float_or_nan(case.largest_stable_dt)
         if not math.isfinite(dt):
             stable[(case.adapter, case.method)] = "none stable"
             continue

@@ -15,6 +15,7 @@ import statistics
 import tomllib
 from pathlib import Path
 
+from harness.common.errors import MbhError
 from harness.report.summary import Table
 
 #: The published results, as shipped with the package.
@@ -36,7 +37,7 @@ QUANTITIES = {
     "table11_max_energy_error_J": ("max_energy_error_J", "max energy-balance error", "J"),
 }
 
-#: How the two sides measure differently (shown with the table; see SEEDS.md and seedtable.py).
+#: How the two sides measure differently (shown with the table; Rouvinen 2003, ch. 7; seedtable.py).
 NOTES = (
     "Constraint error: the seed takes the largest absolute entry of its constraint vector Φ, which "
     "mixes positions (m), direction-cosine products and the Euler-parameter normalisation "
@@ -59,7 +60,7 @@ NOTES = (
 )
 
 
-class SeedTableError(ValueError):
+class SeedTableError(MbhError, ValueError):
     """A seed-table file that cannot be read (names the file and the problem)."""
 
 
@@ -69,7 +70,7 @@ def load_published(path: Path = PUBLISHED_PATH) -> dict:
         return tomllib.load(handle)
 
 
-def _number(value):
+def _json_float(value):
     """A JSON value of ``mbh seed-table --json`` as a float (its "NaN"/"Infinity" strings too);
     None stays None."""
     if value is None:
@@ -119,7 +120,7 @@ def comparison_table(published: dict, ours: list[dict]) -> Table:
                         continue
                     theirs = float(entries[seed_integrator])
                     row = index.get((scenario, integrator, stabilisation))
-                    mine = None if row is None else _number(row.get(column))
+                    mine = None if row is None else _json_float(row.get(column))
                     rows.append((f"{quantity} ({unit} ours)", scenario, seed_integrator,
                                  stabilisation, theirs, mine, _ratio(mine, theirs),
                                  "not in our table" if row is None else row["status"]))
@@ -139,7 +140,7 @@ def newton_table(published: dict, ours: list[dict]) -> Table:
         mine = [row for row in ours
                 if row["scenario"] == scenario and row["integrator"] == INTEGRATORS["gear"]]
         for row in mine:
-            value = _number(row.get("newton_per_step"))
+            value = _json_float(row.get("newton_per_step"))
             rows.append((scenario, row["stabilisation"], theirs, value, _ratio(value, theirs)))
         if not mine:
             rows.append((scenario, None, theirs, None, None))

@@ -27,6 +27,8 @@ from xml.sax.saxutils import escape
 import matplotlib
 from matplotlib.figure import Figure as MplFigure
 
+from harness.common.numbers import is_missing
+
 #: Okabe–Ito colours for lines, in the order series take them (yellow left out: too light).
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")
 #: Markers cycled after the colours (series i: colour i mod 7, marker i div 7).
@@ -113,16 +115,6 @@ def plain(text: str) -> str:
     """``text`` for a matplotlib label: dollar signs escaped so that no mathtext is parsed (a
     method or scenario name is shown as written)."""
     return str(text).replace("$", r"\$")
-
-
-def is_missing(value) -> bool:
-    """None, NaN or pandas' NA."""
-    if value is None:
-        return True
-    try:
-        return bool(value != value)  # NaN and pd.NA (whose != is NA, truthiness raises)
-    except TypeError:
-        return True
 
 
 def outcome(row: Mapping, accuracy: float | None = None) -> str:

@@ -37,13 +37,14 @@ from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.store.runs import CaseCache, RunStore
 from harness.run.sweep import bisections, stability_sweep
 from harness.measure.verdict import Bounds
+from harness.common.errors import MbhError
 
 
 #: How long to wait for a Dask scheduler to answer, s.
 SCHEDULER_CONNECT_S = 30.0
 
 
-class RunnerError(ValueError):
+class RunnerError(MbhError, ValueError):
     """A run that cannot start as asked (bad worker count, unknown or mismatched run to resume)."""
 
 

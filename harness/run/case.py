@@ -17,10 +17,23 @@ from harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
 
 @dataclass(frozen=True)
 class CaseResult:
-    """A judged run and its metrics row (:func:`harness.measure.metrics.case_metrics`)."""
+    """One case's result: the judged trajectory, its metrics
+    (:func:`harness.measure.metrics.case_metrics`) and, for a campaign case, its flat row.
+
+    Attributes
+    ----------
+    trajectory : Trajectory
+        The judged trajectory.
+    metrics : dict
+        :func:`~harness.measure.metrics.case_metrics` of the run; empty when the case failed
+        before it was measured.
+    row : dict or None
+        The flat campaign row (:func:`harness.run.row.run_spec`); None from :func:`run_case`.
+    """
 
     trajectory: Trajectory
     metrics: dict
+    row: dict | None = None
 
 
 def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,

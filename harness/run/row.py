@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import json
 import statistics
-from dataclasses import dataclass
 
 import numpy as np
 import scipy
@@ -32,7 +31,7 @@ from adapters import get_adapter
 from adapters.base import Adapter, UnsupportedCase, describe
 from harness.model import scenario
 from harness.run.spec import CaseSpec, main_output
-from harness.run.case import run_case, simulate_case
+from harness.run.case import CaseResult, run_case, simulate_case
 from harness.common.jsonout import dumps
 from harness.measure.metrics import constraint_violations
 from harness.model.mechanism import Mechanism
@@ -44,14 +43,6 @@ from harness.measure.verdict import Bounds
 #: makes times of different runs and machines comparable as ratios (8000 RK4 steps with
 #: projection; measured 1.05 s of stepping, 1.15 s in all, on the 2-core development machine).
 CALIBRATION = CaseSpec("fourbar", "inhouse", "rk4+direct", 5e-4, 4.0)
-
-
-@dataclass
-class CaseOutcome:
-    """A finished case: its row (see the module docstring) and its judged trajectory."""
-
-    row: dict
-    trajectory: Trajectory
 
 
 def calibration_spec() -> CaseSpec:
@@ -118,7 +109,7 @@ def _metric_columns(metrics: dict, mech: Mechanism) -> dict:
     return row
 
 
-def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseOutcome:
+def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseResult:
     """Run one case and flatten it into a row.
 
     Parameters
@@ -131,10 +122,11 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseOutcome:
 
     Returns
     -------
-    CaseOutcome
-        Never raises for engine trouble: that is the row's status.  An exception raised outside
-        the engine's run (building the model, measuring it) gives status ``failed`` with the
-        exception as the reason.
+    CaseResult
+        With ``row`` set (see the module docstring).  Never raises for engine trouble: that is
+        the row's status.  An exception raised outside the engine's run (building the model,
+        measuring it) gives status ``failed`` with the exception as the reason (and empty
+        ``metrics``).
     """
     mech = scenario.load(spec.scenario)
     adapter = get_adapter(spec.adapter)
@@ -145,11 +137,11 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseOutcome:
         for _ in range(spec.repetitions - 1):
             walls.append(simulate_case(adapter, mech, spec.method, spec.dt, spec.t_end).wall_time_s)
         size = _model_size(adapter, mech)
-    except Exception as error:  # a build or measuring failure is a result (DESIGN rule 6)
+    except Exception as error:  # noqa: BLE001 — a failure to build or measure is a result
         row = error_row(spec, "failed", describe(error))
         row["reference"] = reference_column
-        return CaseOutcome(row, Trajectory.empty(len(mech.bodies), status="failed",
-                                                 reason=row["reason"], failure_time=0.0))
+        return CaseResult(Trajectory.empty(len(mech.bodies), status="failed",
+                                           reason=row["reason"], failure_time=0.0), {}, row)
     trajectory, metrics = result.trajectory, result.metrics
     main = main_output(mech)
     error = metrics.get("output_errors", {}).get(main, float("nan"))
@@ -167,7 +159,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseOutcome:
         **size,
         "reference": reference_column, "packages": packages(adapter),
     }
-    return CaseOutcome(row, trajectory)
+    return CaseResult(trajectory, metrics, row)
 
 
 def error_row(spec: CaseSpec, status: str, reason: str) -> dict:

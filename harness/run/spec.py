@@ -1,66 +1,13 @@
 """Campaign files (TOML, one campaign per file in ``campaigns/``): which cases a run computes.
 
 A campaign is scenarios × adapters × methods × step sizes, written as one or more ``[[group]]``
-blocks (so one file can combine, say, every engine's ``default`` over some steps with the in-house
-methods over others), plus the run's settings.  The validator walks the whole file, collects every
-problem with its field path and raises one :class:`CampaignError` listing them all (the style of
-:mod:`harness.model.scenario`), before anything runs.
+blocks, plus the run's settings.  The validator walks the whole file, collects every problem with
+its field path and raises one :class:`CampaignError` listing them all (the style of
+:mod:`harness.model.scenario`), before anything runs.  Expansion into :class:`CaseSpec` objects is
+deterministic; a case produced twice is kept once, with the earlier group's settings.
 
-File format (times in s)::
-
-    description = "free text"
-    repetitions = 1               # timing repetitions per case (>= 1); metrics from the first
-    timeout_s = 600.0             # wall-clock limit per case, all repetitions together (> 0)
-    accuracy = 1e-6               # threshold on the main output's error (rad or m): "accurate"
-                                  # and the stability sweep's target
-    calibration = true            # run the calibration case (harness.run.row.calibration_spec)
-
-    [bounds]                      # optional: the verdict's bounds (harness.measure.verdict.Bounds fields)
-    gap = 5e-3                    # gap, orientation, energy, branch, trajectory; positive;
-                                  # unnamed: defaults
-    energy = 5e-2
-
-    [t_end]                       # optional: duration overrides, s, per scenario name;
-    "*" = 0.5                     # "*" applies to every scenario not named
-    slider_crank = 1.0
-
-    [[group]]                     # any number, at least one
-    scenarios = "all"             # or a list of scenario names (scenarios/<name>.toml)
-    except = ["andrews"]          # optional, only beside "all": scenarios left out of it
-    adapters = ["mujoco", "exudyn"]   # or "all" (every registered adapter)
-    methods = ["default", "best"] # method strings NAME[:key=value,...] for every adapter above
-    dts = [1e-2, 1e-3]            # steps, s (first-step hints of adaptive methods)
-    repetitions = 3               # optional overrides of the top-level settings for this group
-    timeout_s = 1200.0
-    t_end = { fourbar = 2.0 }     # optional, merged over the top-level [t_end]
-
-    [[group]]
-    scenarios = ["fourbar"]
-    methods = { inhouse = ["rk4+direct:proj_tol=1e-12", "ida"] }   # a table: methods per
-    dts = [1e-4]                  # adapter (its keys are the adapters; no ``adapters`` key then)
-
-    [sweep]                       # optional stability sweep: for each (scenario, adapter, method)
-    scenarios = ["fourbar"]       # the largest dt in [dt_min, dt_max] that gives an ok run within
-    adapters = ["inhouse"]        # ``accuracy`` on the main output, found by bisection
-    methods = ["rk4+none"]        # (list, or a table per adapter as in a group)
-    dt_min = 1e-5
-    dt_max = 1e-2
-    max_bisections = 12
-
-Rules checked: known keys only; scenario files that exist and load; registered adapters; method
-strings the adapter accepts (:meth:`adapters.base.Adapter.method_spec`: unknown names and unknown
-parameters are rejected; engines are imported only for the adapters a file names); ``except``
-names scenarios of ``"all"``; steps finite, > 0 and dividing each scenario's evaluation step (its
-``sample_step``, 0.01 s unless the scene sets it; :func:`harness.model.timegrid.steps_per_sample`) and every
-duration they are used with (t_end an integer multiple of dt, :data:`adapters.base.GRID_RTOL`);
-durations finite, > 0 and not beyond the scenario's own (its reference ends there); repetitions an
-integer >= 1, timeout and accuracy > 0.
-
-Expansion is deterministic: groups in file order, and within a group scenarios (listed order;
-``"all"``: sorted names), adapters, methods, steps in that nesting.  A case already produced by an
-earlier group (same :attr:`CaseSpec.case_id`) is kept once, with the earlier group's settings.
-Whether an engine can run a case (e.g. a spatial-only method on a planar scene) is not checked
-here: such a case is a result with status ``unsupported``.
+The file format (keys, defaults, the rules checked, expansion order, an example) is documented in
+``docs/formats/campaign.md``.
 """
 
 from __future__ import annotations
@@ -79,6 +26,7 @@ from harness.model.mechanism import Mechanism
 from harness.model.timegrid import steps_per_sample
 from harness.model.scenario import Problem, _Collector, _join
 from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from harness.common.errors import MbhError
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[2] / "campaigns"
 
@@ -196,7 +144,7 @@ class Campaign:
     description: str = ""
 
 
-class CampaignError(ValueError):
+class CampaignError(MbhError, ValueError):
     """Raised once per file with every :class:`~harness.model.scenario.Problem` found."""
 
     def __init__(self, problems: list[Problem]):

@@ -49,8 +49,8 @@ from harness.store.schema import (CASE_COLUMNS, SCHEMA_VERSION, SWEEP_COLUMNS, V
                                   column_type, migrate_manifest, migrate_table)
 from harness.model.trajectory import Trajectory
 
-__all__ = ["SCHEMA_VERSION", "results_root", "RunStore", "list_runs", "load_run", "CaseCache",
-           "RUN_STATUSES"]
+__all__ = ["SCHEMA_VERSION", "results_root", "RunStore", "list_runs", "latest_run", "load_run",
+           "CaseCache", "RUN_STATUSES"]
 
 #: Environment variable naming the results root.
 ROOT_ENV = "MBH_RESULTS_DIR"
@@ -464,6 +464,25 @@ def list_runs(root: Path | None = None) -> list[dict]:
     manifests = [migrate_manifest(_read_json(path / _MANIFEST), str(path / _MANIFEST))
                  for path in _run_folders(_root(root))]
     return sorted(manifests, key=lambda m: (m["started"], m["run_id"]))
+
+
+def latest_run(campaign: str, root: Path | None = None, *, before: str | None = None,
+               statuses: tuple[str, ...] = RUN_STATUSES[1:]) -> str | None:
+    """The id of the latest stored run of campaign ``campaign`` whose status is one of
+    ``statuses`` (default: finished, complete or interrupted), or None when there is none.
+
+    With ``before``, only runs started before run ``before`` count (None when ``before`` is not
+    stored): the run a report of ``before`` compares with.  Without, every stored run counts:
+    the run a new run of the campaign compares with.
+    """
+    manifests = list_runs(root)
+    if before is not None:
+        mine = next((m for m in manifests if m["run_id"] == before), None)
+        if mine is None:
+            return None
+        manifests = [m for m in manifests if m["started"] < mine["started"]]
+    runs = [m for m in manifests if m["campaign"] == campaign and m["status"] in statuses]
+    return runs[-1]["run_id"] if runs else None
 
 
 def load_run(run_id: str, root: Path | None = None) -> pd.DataFrame:

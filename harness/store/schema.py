@@ -24,6 +24,8 @@ from __future__ import annotations
 import pyarrow as pa
 import pyarrow.compute as pc
 
+from harness.common.errors import MbhError
+
 #: The layout this code writes.
 SCHEMA_VERSION = 2
 
@@ -114,7 +116,7 @@ _TABLE_MIGRATIONS = {1: _migrate_table_1_to_2}
 _MANIFEST_MIGRATIONS = {1: _migrate_manifest_1_to_2}
 
 
-class SchemaError(ValueError):
+class SchemaError(MbhError, ValueError):
     """A stored file has a schema version this code cannot read (names file and version)."""
 
 

@@ -19,6 +19,7 @@ from typing import Callable
 import numpy as np
 
 from harness.model import scenario
+from harness.run.case import CaseResult
 from harness.run.spec import CaseSpec, load_campaign, main_output
 from harness.model.mechanism import Mechanism
 from harness.model.outputs import output_series
@@ -26,12 +27,13 @@ from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.model.timegrid import reference_indices
 from harness.model.trajectory import Trajectory
 from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from harness.common.errors import MbhError
 
 #: Key of a tolerance table (and of a :class:`Selection`) that matches every name.
 ANY = "*"
 
 
-class ToleranceError(ValueError):
+class ToleranceError(MbhError, ValueError):
     """A tolerance file, or an assertion's arguments, that cannot be used; the message says
     which file or argument, which field and why."""
 
@@ -132,16 +134,16 @@ class Selection:
 
 
 @dataclass
-class CaseResult:
-    """A finished case.
+class SessionCase:
+    """A case finished in this test session: its result with what the tolerance assertions
+    need around it (the spec, the mechanism, the reference, the session's calibration).
 
     Attributes
     ----------
     spec : CaseSpec
-    row : dict
-        The campaign row (:func:`harness.run.row.run_spec`): status, reason, errors, wall time…
-    trajectory : Trajectory
-        The judged trajectory, sampled every 10 ms.
+    result : CaseResult
+        The case's result (:func:`harness.run.row.run_spec`): the judged trajectory, sampled
+        every 10 ms, and the campaign row (status, reason, errors, wall time…).
     mechanism : Mechanism
     reference : Trajectory or None
         The scenario's verified reference (None when it has none).
@@ -150,11 +152,20 @@ class CaseResult:
     """
 
     spec: CaseSpec
-    row: dict
-    trajectory: Trajectory
+    result: CaseResult
     mechanism: Mechanism
     reference: Trajectory | None
     calibration: Callable[[], float] = field(repr=False)
+
+    @property
+    def row(self) -> dict:
+        """The campaign row (:func:`harness.run.row.run_spec`)."""
+        return self.result.row
+
+    @property
+    def trajectory(self) -> Trajectory:
+        """The judged trajectory."""
+        return self.result.trajectory
 
     @property
     def label(self) -> str:
@@ -211,12 +222,12 @@ class CaseRunner:
 
     def __init__(self, bounds: Bounds = DEFAULT_BOUNDS, accuracy: float = DEFAULT_ACCURACY):
         self.bounds, self.accuracy = bounds, accuracy
-        self._results: dict[str, CaseResult] = {}
+        self._results: dict[str, SessionCase] = {}
         self._references: dict[str, Trajectory | None] = {}
         self._calibration_s: float | None = None
 
     @property
-    def finished(self) -> dict[str, CaseResult]:
+    def finished(self) -> dict[str, SessionCase]:
         """Every case run so far, by :attr:`CaseSpec.case_id`."""
         return dict(self._results)
 
@@ -248,25 +259,24 @@ class CaseRunner:
             self._calibration_s = float(row["wall_time_s"])
         return self._calibration_s
 
-    def run(self, spec: CaseSpec) -> CaseResult:
+    def run(self, spec: CaseSpec) -> SessionCase:
         """The finished case ``spec`` (run now unless already run this session)."""
         from harness.run.row import run_spec
 
         if spec.case_id not in self._results:
             self.reference(spec.scenario)  # loaded once per session, not once per case
-            outcome = run_spec(spec, self.bounds, self.accuracy)
-            self._results[spec.case_id] = CaseResult(
-                spec, outcome.row, outcome.trajectory, scenario.load(spec.scenario),
+            self._results[spec.case_id] = SessionCase(
+                spec, run_spec(spec, self.bounds, self.accuracy), scenario.load(spec.scenario),
                 self.reference(spec.scenario), self.calibration_s)
         return self._results[spec.case_id]
 
     def case(self, scenario_name: str, adapter: str, method: str, dt: float,
-             t_end: float | None = None, repetitions: int = 1) -> CaseResult:
+             t_end: float | None = None, repetitions: int = 1) -> SessionCase:
         """:meth:`run` of :func:`case_spec` (same arguments)."""
         return self.run(case_spec(scenario_name, adapter, method, dt, t_end, repetitions))
 
     def steps(self, scenario_name: str, adapter: str, method: str, dts,
-              t_end: float | None = None) -> list[CaseResult]:
+              t_end: float | None = None) -> list[SessionCase]:
         """One case per step size in ``dts`` (s): the input of :func:`assert_convergence_order`."""
         return [self.case(scenario_name, adapter, method, dt, t_end) for dt in dts]
 

@@ -67,7 +67,8 @@ def _unit_vectors(draw, planar: bool = False) -> np.ndarray:
 
 
 @st.composite
-def _points(draw, planar: bool, centre=np.zeros(3), spread: float = 1.0) -> np.ndarray:
+def _points(draw, planar: bool, centre=np.zeros(3),  # noqa: B008 (read only)
+            spread: float = 1.0) -> np.ndarray:
     """A world point within ``spread`` m of ``centre`` per coordinate (z = 0 if ``planar``)."""
     offset = np.array([draw(_coordinate), draw(_coordinate), 0.0 if planar else draw(_coordinate)])
     return np.asarray(centre, dtype=float) + spread * offset

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from harness.run.spec import CaseSpec, main_output
-from harness.testing.cases import ANY, CaseResult, ToleranceError, step_text
+from harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
 from harness.measure.energy import energy_balance, energy_scale
 from harness.measure.metrics import lever_length, violation_series
 from harness.model.trajectory import STATUSES
@@ -51,7 +51,7 @@ TIME_MATCH = 1e-9
 
 # --- assertions -----------------------------------------------------------------------------
 
-def _sample_indices(result: CaseResult, times) -> np.ndarray:
+def _sample_indices(result: SessionCase, times) -> np.ndarray:
     """Indices of the samples at ``times`` (s); all samples when None."""
     samples = result.trajectory.times
     if times is None:
@@ -70,14 +70,14 @@ def _worst(excess: np.ndarray) -> int:
     return int(np.argmax(np.where(np.isfinite(excess), excess, np.inf)))
 
 
-def _no_samples(result: CaseResult) -> None:
+def _no_samples(result: SessionCase) -> None:
     __tracebackhide__ = True
     if result.trajectory.n_samples == 0:
         raise AssertionError(f"{result.describe()}: no samples to check "
                              f"({result.trajectory.reason})")
 
 
-def assert_status(result: CaseResult, expected: str = "ok") -> None:
+def assert_status(result: SessionCase, expected: str = "ok") -> None:
     """The case ended with status ``expected`` (:data:`harness.model.trajectory.STATUSES`)."""
     __tracebackhide__ = True
     if expected not in STATUSES:
@@ -88,13 +88,13 @@ def assert_status(result: CaseResult, expected: str = "ok") -> None:
                              f"{result.trajectory.failure_time})")
 
 
-def assert_close_to_reference(result: CaseResult, output: str | None = None, atol: float = 0.0,
+def assert_close_to_reference(result: SessionCase, output: str | None = None, atol: float = 0.0,
                               rtol: float = 0.0, times=None) -> None:
     """|y(t) − y_ref(t)| <= atol + rtol·|y_ref(t)| at every sample (or at ``times``, s).
 
     Parameters
     ----------
-    result : CaseResult
+    result : SessionCase
     output : str, optional
         A scenario output (default its main output); values in its unit (rad, m, rad/s, m/s).
     atol, rtol : float
@@ -125,7 +125,7 @@ def assert_close_to_reference(result: CaseResult, output: str | None = None, ato
         f"  {int(outside.sum())} of {index.size} checked samples outside the tolerance")
 
 
-def _series_below(result: CaseResult, what: str, series: np.ndarray, bound: float,
+def _series_below(result: SessionCase, what: str, series: np.ndarray, bound: float,
                   unit: str) -> None:
     __tracebackhide__ = True
     if not bound > 0:
@@ -141,7 +141,7 @@ def _series_below(result: CaseResult, what: str, series: np.ndarray, bound: floa
         f"  {int(outside.sum())} of {series.size} samples above the bound")
 
 
-def constraint_violation_series(result: CaseResult) -> np.ndarray:
+def constraint_violation_series(result: SessionCase) -> np.ndarray:
     """Per-sample position-level constraint violation, m, shape (n_samples,): the larger of the
     joint gap and the orientation residual × the lever length (the per-sample figure whose
     maximum is :func:`harness.measure.metrics.constraint_violations`' ``max_constraint_violation``)."""
@@ -150,7 +150,7 @@ def constraint_violation_series(result: CaseResult) -> np.ndarray:
                       lever_length(result.mechanism) * series["orientation_rad"])
 
 
-def energy_error_series(result: CaseResult) -> np.ndarray:
+def energy_error_series(result: SessionCase) -> np.ndarray:
     """Per-sample |energy-balance error| / the energy scale, shape (n_samples,)
     (:func:`harness.measure.energy.energy_balance`, :func:`harness.measure.energy.energy_scale`)."""
     if result.reference is None:
@@ -162,7 +162,7 @@ def energy_error_series(result: CaseResult) -> np.ndarray:
     return np.abs(energy_balance(result.mechanism, result.trajectory, result.reference)) / scale
 
 
-def assert_constraint_violation_below(result: CaseResult, bound: float) -> None:
+def assert_constraint_violation_below(result: SessionCase, bound: float) -> None:
     """The position-level constraint violation stays <= ``bound`` (m) at every sample
     (:func:`constraint_violation_series`)."""
     __tracebackhide__ = True
@@ -171,7 +171,7 @@ def assert_constraint_violation_below(result: CaseResult, bound: float) -> None:
                   " m")
 
 
-def assert_energy_error_below(result: CaseResult, bound: float) -> None:
+def assert_energy_error_below(result: SessionCase, bound: float) -> None:
     """|energy-balance error| / energy scale stays <= ``bound`` at every sample
     (:func:`energy_error_series`)."""
     __tracebackhide__ = True
@@ -180,7 +180,7 @@ def assert_energy_error_below(result: CaseResult, bound: float) -> None:
                   energy_error_series(result), bound, "")
 
 
-def convergence_order(results: list[CaseResult], output: str | None = None) -> float:
+def convergence_order(results: list[SessionCase], output: str | None = None) -> float:
     """Slope of log(max error) against log(dt) over ``results`` (least squares).
 
     Raises
@@ -197,13 +197,13 @@ def convergence_order(results: list[CaseResult], output: str | None = None) -> f
     return float(np.polyfit(np.log(steps), np.log(errors), 1)[0])
 
 
-def _max_error(result: CaseResult, output: str | None) -> float:
+def _max_error(result: SessionCase, output: str | None) -> float:
     if result.trajectory.n_samples == 0:
         return math.nan
     return float(np.max(np.abs(result.output(output)[1] - result.reference_output(output))))
 
 
-def assert_convergence_order(results: list[CaseResult], low: float, high: float,
+def assert_convergence_order(results: list[SessionCase], low: float, high: float,
                              output: str | None = None) -> None:
     """The measured order (:func:`convergence_order`) lies in [low, high]; every case ``ok``."""
     __tracebackhide__ = True
@@ -222,7 +222,7 @@ def assert_convergence_order(results: list[CaseResult], low: float, high: float,
         f"[{low:g}, {high:g}]\n  max error by step: {table}")
 
 
-def assert_at_least_as_fast(result: CaseResult, other: CaseResult, factor: float = 1.0) -> None:
+def assert_at_least_as_fast(result: SessionCase, other: SessionCase, factor: float = 1.0) -> None:
     """``result`` takes at most ``factor`` times ``other``'s calibrated wall time (each wall
     time divided by its session's calibration case time, so runs compare as ratios)."""
     __tracebackhide__ = True
@@ -277,7 +277,7 @@ class CaseTolerance:
     source: str = ""
 
 
-def assert_within_tolerance(result: CaseResult, tolerance: CaseTolerance) -> None:
+def assert_within_tolerance(result: SessionCase, tolerance: CaseTolerance) -> None:
     """Every tolerance of ``tolerance`` holds for ``result``: the status, then (for an
     expected ``ok``) each output, the constraint violation and the energy error."""
     __tracebackhide__ = True
@@ -326,7 +326,7 @@ class Tolerances:
             self._fail(where, f"expected a table (scenario.adapter.method), got {value!r}")
         return value
 
-    def _number(self, value, where: str, least: float = 0.0) -> float:
+    def _checked_number(self, value, where: str, least: float = 0.0) -> float:
         if isinstance(value, bool) or not isinstance(value, (int, float)) \
                 or not math.isfinite(value) or value < least:
             self._fail(where, f"expected a finite number >= {least:g}, got {value!r}")
@@ -349,8 +349,8 @@ class Tolerances:
                                 for name, spec in self._table(value, field_).items()}
             elif key == "order":
                 if (not isinstance(value, list) or len(value) != 2
-                        or self._number(value[0], field_, -math.inf)
-                        > self._number(value[1], field_, -math.inf)):
+                        or self._checked_number(value[0], field_, -math.inf)
+                        > self._checked_number(value[1], field_, -math.inf)):
                     self._fail(field_, f"expected [low, high] with low <= high, got {value!r}")
                 checked[key] = (float(value[0]), float(value[1]))
             elif key == "dt":
@@ -358,7 +358,7 @@ class Tolerances:
                                 self._entry(sub, f"{field_}.{step}", False)
                                 for step, sub in self._table(value, field_).items()}
             else:
-                checked[key] = self._number(value, field_, math.ulp(0.0))
+                checked[key] = self._checked_number(value, field_, math.ulp(0.0))
         return checked
 
     def _output(self, spec, where: str) -> OutputTolerance:
@@ -367,7 +367,7 @@ class Tolerances:
         if unknown:
             self._fail(f"{where}.{sorted(unknown)[0]}",
                        f"unknown key (allowed: {', '.join(OUTPUT_KEYS)})")
-        return OutputTolerance(**{key: self._number(spec[key], f"{where}.{key}")
+        return OutputTolerance(**{key: self._checked_number(spec[key], f"{where}.{key}")
                                   for key in OUTPUT_KEYS if key in spec})
 
     def _step(self, text: str, where: str) -> float:

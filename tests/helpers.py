@@ -1,0 +1,133 @@
+"""Helpers shared by test files in several folders: constants and plain functions (no fixtures;
+those are in ``tests/conftest.py``).  Test files import from here, never from one another."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import sys
+from pathlib import Path
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from harness import cli
+from harness.model import scenario
+from harness.neutral.dynamics import start_accelerations
+
+#: The tests/ folder, the repository's root above it, and the committed test data.
+TESTS = Path(__file__).resolve().parent
+ROOT = TESTS.parent
+DATA = TESTS / "data"
+
+GRAVITY = 9.81  # m/s², double_fourbar's gravity
+
+#: Scenes with a shipped verified reference and the seed's outputs (crank_angle, driver "O"); the
+#: adapter tests' accuracy tables are measured on them.  ``double_fourbar`` (verified along its
+#: declared branch) has other outputs and is checked in tests/references/test_double_fourbar.py
+#: and test_branch_route.py.
+VERIFIED_SCENES = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
+
+
+def reduced_tip(times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Tip (x, y) of ``double_fourbar``'s first crank from its one-degree-of-freedom model
+    3 φ̈ = −3.5 g cos φ (derived in tests/references/test_double_fourbar.py), shape (n,) each,
+    m."""
+    def rhs(_t, state):
+        return [state[1], -(3.5 / 3.0) * GRAVITY * np.cos(state[0])]
+
+    solution = solve_ivp(rhs, (0.0, times[-1]), [np.pi / 2, -1.0], method="DOP853",
+                         rtol=1e-13, atol=1e-13, t_eval=times)
+    return np.cos(solution.y[0]), np.sin(solution.y[0])
+
+
+def variant_text(name: str, replacements: list[tuple[str, str]]) -> str:
+    """The shipped scenario ``name`` with each ``old`` text replaced by ``new`` (must occur)."""
+    text = scenario.scenario_path(name).read_text()
+    for old, new in replacements:
+        assert old in text, f"fixture edit {old!r} not found in {name}.toml"
+        text = text.replace(old, new)
+    return text
+
+
+# --- The compiled stepping path (tests/adapters/inhouse/test_compiled_path.py, test_fold.py,
+# test_generated.py).
+
+#: Bound on the difference of the compiled and the Python paths' trajectories: see the docstring of
+#: tests/adapters/inhouse/test_compiled_path.py.
+PATH_BOUND = 1e-10  # m and m/s (rad, rad/s on angles' velocities)
+
+#: Scenes whose generated functions take longest to compile (~30 s a scene on a machine that has
+#: not compiled them yet): their generated loops run in the slow suite.
+LARGE_TRACES = ("andrews", "fourbar_spatial")
+
+
+# --- Engine accelerations at the start against the neutral model
+# (tests/engines/test_generated_mechanisms.py, tests/adapters/exudyn/test_exudyn_adapter.py).
+
+#: (b) Sample spacing T (s) and number of samples of the acceleration difference, and each
+#: adapter's step (s).  Exudyn steps at 2.5e-5 s: its generalized-α is 3.1e-3 off (relative) at
+#: 5e-5 s on the fastest generated ladder measured (angular accelerations of 9e3 rad/s²), 6.2e-5
+#: at 2.5e-5 s, while smaller steps lose digits in its index-3 Newton iteration (4.5e-3 m/s² off
+#: on a slow ladder at 1e-5 s, 1.0e-4 relative on two prismatic sliders at 2e-5 s; 1.1e-5 on
+#: those sliders at 2.5e-5 s).  MuJoCo steps at 1e-5 s: its soft constraints are 1.9e-3 off on
+#: the fast ladder at 5e-5 s, 3.9e-4 at 1e-5 s.
+ACCELERATION_SPAN = 2.5e-4
+ACCELERATION_SAMPLES = 5
+ACCELERATION_STEP = {"pybullet": 1e-6, "exudyn": 2.5e-5, "mujoco": 1e-5}
+ACCELERATION_STEP_DEFAULT = 5e-5
+#: (b) Allowed |engine − neutral| acceleration over (1 + largest neutral acceleration), per
+#: adapter, measured worst over 1500 random examples / on the fastest ladders found in 4000 more
+#: (9e3 rad/s², where the difference's own T⁴ error is 7.8e-5): Exudyn 1.1e-5 / 6.8e-5,
+#: Pinocchio 3.8e-8 / 7.8e-5, in-house 2.9e-7 / 7.8e-5, MuJoCo 4.5e-4 / 4.5e-4 (soft equality
+#: constraints, impedance 0.9999), PyBullet 5.9e-3 / 5.7e-3 (velocity-level closures); margin
+#: ≥ 2.2.  (In-house starts from the harness's start like every engine; before
+#: it did, 0.33 relative was measured here.)
+ACCELERATION_TOLERANCE = {"mujoco": 1e-3, "pybullet": 1.5e-2, "pinocchio": 2e-4, "exudyn": 2e-4,
+                          "inhouse": 2e-4}
+
+
+def measured_acceleration_gap(adapter, model, expected) -> tuple[float, float]:
+    """``(|engine − neutral| acceleration, 1 + largest neutral acceleration)`` of the run of
+    ``model`` with ``best``, sampled every :data:`ACCELERATION_SPAN` (m/s², rad/s²)."""
+    name = adapter.name
+    times = ACCELERATION_SPAN * np.arange(ACCELERATION_SAMPLES)
+    step = ACCELERATION_STEP.get(name, ACCELERATION_STEP_DEFAULT)
+    trajectory = adapter.simulate(model, "best", step, times[-1], times)
+    assert trajectory.status == "ok", f"{name}: {trajectory.status}: {trajectory.reason}"
+    measured = start_accelerations(trajectory.times, trajectory.velocity,
+                                   trajectory.angular_velocity)
+    worst = max(float(np.max(np.abs(measured.linear - expected.linear))),
+                float(np.max(np.abs(measured.angular - expected.angular))))
+    scale = 1.0 + max(float(np.max(np.abs(expected.linear))),
+                      float(np.max(np.abs(expected.angular))))
+    return worst, scale
+
+
+# --- The ``mbh`` command (tests/report/).
+
+#: ``mbh`` as a subprocess command line.
+MBH = [sys.executable, "-m", "harness.cli"]
+
+
+def run_mbh(*argv: str) -> tuple[int, str, str]:
+    """``mbh ARGV`` in this process: status, stdout, stderr."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = cli.main(list(argv))
+    return status, out.getvalue(), err.getvalue()
+
+
+def seed_rows() -> list[dict]:
+    """A seed table in the shape of ``mbh seed-table --json`` (numbers invented for the test;
+    one value as the strict-JSON string "NaN")."""
+    rows = []
+    for scene in ("fourbar_spatial", "slider_crank"):
+        for integrator in ("rk4", "rkn4", "bdf4"):
+            for stabilisation in ("none", "baumgarte", "direct"):
+                rows.append({"scenario": scene, "integrator": integrator,
+                             "stabilisation": stabilisation, "status": "ok", "reason": "",
+                             "max_violation": 2e-3, "mean_violation": 1e-5,
+                             "max_energy_error_J": "NaN" if integrator == "rk4" else 10.0,
+                             "wall_time_s": 0.5, "newton_per_step": 3.0})
+    return rows
