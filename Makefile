@@ -4,7 +4,8 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: report test test-slow check clean-venv
+.PHONY: report test test-slow lint docs check clean-venv
+DOCS_STAMP := $(VENV)/.installed-docs
 
 $(STAMP): pyproject.toml
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
@@ -38,6 +39,19 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -m slow
+
+# `make lint`: Ruff with the rules of pyproject.toml ([tool.ruff]) over the whole repository.
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+# `make docs`: install the docs extra into .venv, then build docs/ strictly (a broken link or a
+# missing page fails) into site/.
+$(DOCS_STAMP): $(STAMP) pyproject.toml
+	$(BIN)/python -m pip install --quiet -e ".[test,docs]"
+	touch $(DOCS_STAMP)
+
+docs: $(DOCS_STAMP)
+	$(BIN)/mkdocs build --strict --site-dir site
 
 clean-venv:
 	rm -rf $(VENV)

@@ -15,6 +15,7 @@ from harness import cli
 
 from harness.common import jsonout
 from harness.common.capture import captured_output, engine_note
+from tests.helpers import ROOT
 
 
 def _refuse(token):
@@ -28,7 +29,7 @@ def strict_loads(text: str):
 
 def mbh(*argv: str) -> subprocess.CompletedProcess:
     return subprocess.run([sys.executable, "-m", "harness.cli", *argv], capture_output=True,
-                          text=True, timeout=600, cwd=os.path.dirname(os.path.dirname(__file__)))
+                          text=True, timeout=600, cwd=ROOT)
 
 
 def test_non_finite_floats_are_written_as_strings():

@@ -14,7 +14,9 @@ and skipped) the suite checks
 Engine accelerations (b) are measured from the engine's own run with ``best``: the one-sided
 fourth-order difference (−25 v(0) + 48 v(T) − 36 v(2T) + 16 v(3T) − 3 v(4T)) / (12T)
 (:func:`~harness.neutral.dynamics.start_accelerations`) of the velocities sampled every
-T = :data:`ACCELERATION_SPAN`, each adapter stepping at its ``ACCELERATION_STEP``.  (The
+T = :data:`tests.helpers.ACCELERATION_SPAN`, each adapter stepping at its ``ACCELERATION_STEP``
+(the constants and the measurement, shared with the Exudyn adapter's tests, are in
+:mod:`tests.helpers`).  (The
 second-order difference over 0, T, 2T with T = 1 ms used before errs by T²/3 times the velocity's
 third derivative: 1.3e-2 relative on a generated R–S–U–R ladder accelerating at 920 rad/s², in
 every engine alike.)  PyBullet's loop closures act at the velocity level, so its first step
@@ -33,7 +35,6 @@ refused starts) with ``pytest --hypothesis-show-statistics``.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -51,14 +52,14 @@ from harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
 from harness.neutral.dynamics import (
     IndeterminateAccelerations,
     accelerations,
-    start_accelerations,
 )
 from harness.model.scenario import load
 from harness.model.topology import spanning_tree
 from harness.model.trajectory import BodyStates
+from tests.helpers import ACCELERATION_TOLERANCE, DATA, measured_acceleration_gap
 
 #: The IFToMM N-four-bar (N = 2) declared breadth-first, the order of issue 9.
-NFOURBAR = Path(__file__).parent / "data" / "nfourbar_breadth_first.toml"
+NFOURBAR = DATA / "nfourbar_breadth_first.toml"
 
 DEFAULT_EXAMPLES = 15
 SLOW_EXAMPLES = 200
@@ -78,26 +79,6 @@ _FIELDS = ("position", "quaternion", "velocity", "angular_velocity")
 #: Pinocchio 6.3e-15, PyBullet 5.5e-15, Exudyn 6.7e-16; in-house: see :data:`INHOUSE_START`.
 START_TOLERANCE = 1e-12
 
-#: (b) Sample spacing T (s) and number of samples of the acceleration difference, and each
-#: adapter's step (s).  Exudyn steps at 2.5e-5 s: its generalized-α is 3.1e-3 off (relative) at
-#: 5e-5 s on the fastest generated ladder measured (angular accelerations of 9e3 rad/s²), 6.2e-5
-#: at 2.5e-5 s, while smaller steps lose digits in its index-3 Newton iteration (4.5e-3 m/s² off
-#: on a slow ladder at 1e-5 s, 1.0e-4 relative on two prismatic sliders at 2e-5 s; 1.1e-5 on
-#: those sliders at 2.5e-5 s).  MuJoCo steps at 1e-5 s: its soft constraints are 1.9e-3 off on
-#: the fast ladder at 5e-5 s, 3.9e-4 at 1e-5 s.
-ACCELERATION_SPAN = 2.5e-4
-ACCELERATION_SAMPLES = 5
-ACCELERATION_STEP = {"pybullet": 1e-6, "exudyn": 2.5e-5, "mujoco": 1e-5}
-ACCELERATION_STEP_DEFAULT = 5e-5
-#: (b) Allowed |engine − neutral| acceleration over (1 + largest neutral acceleration), per
-#: adapter, measured worst over 1500 random examples / on the fastest ladders found in 4000 more
-#: (9e3 rad/s², where the difference's own T⁴ error is 7.8e-5): Exudyn 1.1e-5 / 6.8e-5,
-#: Pinocchio 3.8e-8 / 7.8e-5, in-house 2.9e-7 / 7.8e-5, MuJoCo 4.5e-4 / 4.5e-4 (soft equality
-#: constraints, impedance 0.9999), PyBullet 5.9e-3 / 5.7e-3 (velocity-level closures); margin
-#: ≥ 2.2.  (In-house starts from the harness's start like every engine; before
-#: it did, 0.33 relative was measured here.)
-ACCELERATION_TOLERANCE = {"mujoco": 1e-3, "pybullet": 1.5e-2, "pinocchio": 2e-4, "exudyn": 2e-4,
-                          "inhouse": 2e-4}
 #: (c) Run of the two declaration orders: end time (s), step (s), samples.
 ORDER_RUN = (0.05, 1e-3, np.linspace(0.0, 0.05, 6))
 #: (c) Largest difference allowed between the two orders' body states (m, 1, m/s, rad/s) after
@@ -286,23 +267,6 @@ def acceleration_gap(name: str, mech: Mechanism) -> tuple[float, float] | None:
     _describe(mech)
     adapter, model = built
     return measured_acceleration_gap(adapter, model, expected)
-
-
-def measured_acceleration_gap(adapter, model, expected) -> tuple[float, float]:
-    """``(|engine − neutral| acceleration, 1 + largest neutral acceleration)`` of the run of
-    ``model`` with ``best``, sampled every :data:`ACCELERATION_SPAN` (m/s², rad/s²)."""
-    name = adapter.name
-    times = ACCELERATION_SPAN * np.arange(ACCELERATION_SAMPLES)
-    step = ACCELERATION_STEP.get(name, ACCELERATION_STEP_DEFAULT)
-    trajectory = adapter.simulate(model, "best", step, times[-1], times)
-    assert trajectory.status == "ok", f"{name}: {trajectory.status}: {trajectory.reason}"
-    measured = start_accelerations(trajectory.times, trajectory.velocity,
-                                   trajectory.angular_velocity)
-    worst = max(float(np.max(np.abs(measured.linear - expected.linear))),
-                float(np.max(np.abs(measured.angular - expected.angular))))
-    scale = 1.0 + max(float(np.max(np.abs(expected.linear))),
-                      float(np.max(np.abs(expected.angular))))
-    return worst, scale
 
 
 def _check_accelerations(name: str, mech: Mechanism) -> None:

@@ -19,6 +19,7 @@ from harness import cli
 from harness.jobs import nightly
 from harness.run.campaign import CaseWork
 from harness.store.runs import list_runs
+from tests.helpers import ROOT
 
 CAMPAIGN = """
 description = "nightly test: three cheap four-bar cases"
@@ -104,7 +105,7 @@ def test_nightly_twice_is_clean_and_an_injected_regression_fails_it(tmp_path, mo
 def test_workflow_runs_the_nightly_on_a_schedule_and_keeps_its_outputs():
     import yaml
 
-    path = Path(__file__).resolve().parent.parent / ".github" / "workflows" / "nightly.yml"
+    path = ROOT / ".github" / "workflows" / "nightly.yml"
     workflow = yaml.safe_load(path.read_text())
     triggers = workflow[True]  # YAML 1.1 reads the key `on` as true
     assert triggers["schedule"][0]["cron"] and "workflow_dispatch" in triggers

@@ -8,7 +8,7 @@ T = N · ½ m L² φ̇²; crank centres sit at height ½ sin φ, couplers at sin
     ((N + 1)/3 + N) φ̈ = −g ((N + 1)/2 + N) cos φ,
 
 with the first crank's tip at (cos φ, sin φ); N = 2 gives 3 φ̈ = −3.5 g cos φ
-(``tests/test_double_fourbar.py``).
+(``tests/references/test_double_fourbar.py``).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 import pytest
-from conftest import variant_text
+from tests.helpers import variant_text
 
 from adapters.inhouse.constraints import layout_of
 from adapters.inhouse.kinematics import assemble as inhouse_assemble
@@ -205,7 +205,8 @@ def test_check_all_reports_mobility_one_and_no_redundancy(capsys):
     status, rows = check_json(capsys, "--all")
     assert status == 0
     assert [row["scenario"] for row in rows] == SHIPPED
-    overconstrained = {"bricard": (1, 0, 1)}  # Grübler 0, one redundant row: tests/test_bricard.py
+    # Grübler 0, one redundant row: tests/references/test_bricard.py
+    overconstrained = {"bricard": (1, 0, 1)}
     for row in rows:
         assert (row["mobility"], row["grubler_mobility"], row["redundant_equations"]) \
             == overconstrained.get(row["scenario"], (1, 1, 0))

@@ -287,7 +287,7 @@ def test_jacobian_matches_finite_differences_along_exp_map_perturbations(case):
                 twist = np.zeros(6)
                 twist[component] = 1.0
 
-                def moved(step):
+                def moved(step, states=states, body=body, twist=twist):
                     position, quaternion = states.position.copy(), states.quaternion.copy()
                     position[body] += step * twist[:3]
                     quaternion[body] = turned(Rotation.from_rotvec(step * twist[3:]),

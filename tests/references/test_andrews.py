@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import harness
 from adapters import get_adapter
 from harness.model import scenario
 from harness.neutral.start import initial_state
@@ -25,7 +26,7 @@ from harness.model.outputs import output_series
 from harness.neutral.mobility import rank_analysis
 from harness.references.build import reference_grid, reference_trajectory
 
-PUBLISHED = Path(scenario.__file__).resolve().parent / "data" / "andrews_testset.toml"
+PUBLISHED = Path(harness.__file__).resolve().parent / "data" / "andrews_testset.toml"
 
 
 @pytest.fixture(scope="module")

@@ -1,7 +1,7 @@
 """The reference routes along a declared branch (``harness/references/routes.py``) and the scenario
 table that declares it, on the N-four-bar ``double_fourbar``.
 
-The outside check is the one-degree-of-freedom model of ``tests/test_double_fourbar.py``
+The outside check is the one-degree-of-freedom model of ``tests/references/test_double_fourbar.py``
 (3 φ̈ = −3.5 g cos φ, tip at (cos φ, sin φ)), which knows nothing of either route.
 """
 
@@ -11,7 +11,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import reduced_tip
+from tests.helpers import reduced_tip
 from scipy.spatial.transform import Rotation
 
 from harness.model import scenario

@@ -14,15 +14,15 @@ so 3 φ̈ = −3.5 g cos φ, and the first crank's tip is (cos φ, sin φ).
 
 The full model is checked here against that model through the in-house ``rk4+direct`` at
 Δt = 1e-3 (its convergence through the passages, with placed passage steps, is in
-``tests/test_fold.py``); the verified reference, built along the declared branch, is checked
-against it in ``tests/test_branch_route.py``.
+``tests/adapters/inhouse/test_fold.py``); the verified reference, built along the declared
+branch, is checked against it in ``tests/references/test_branch_route.py``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import reduced_tip
+from tests.helpers import reduced_tip
 
 from adapters import get_adapter
 from harness.model import scenario

@@ -8,117 +8,22 @@ takes about 20 s on the 2-core development machine (every case in its own proces
 
 from __future__ import annotations
 
-import contextlib
-import io
-import json
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from harness import cli
 from harness.report import build
-from harness.store.runs import RunStore
-
-#: The tiny campaign of the fixture run.
-CAMPAIGN = """\
-description = "report test: the four-bar, two engines that work and one that fails at t = 0"
-repetitions = 1
-timeout_s = 120.0
-accuracy = 1e-4
-calibration = true
-
-[t_end]
-"*" = 0.2
-
-[[group]]
-scenarios = ["fourbar"]
-adapters = ["inhouse"]
-methods = ["rk4+none"]
-dts = [1e-2, 1e-3]
-
-[[group]]
-scenarios = ["fourbar"]
-adapters = ["mujoco", "pinocchio"]
-methods = ["default"]
-dts = [1e-3]
-
-[sweep]
-scenarios = ["fourbar"]
-adapters = ["inhouse"]
-methods = ["rk4+none"]
-dt_min = 5e-3
-dt_max = 1e-2
-max_bisections = 1
-"""
+from harness.store.runs import RunStore, latest_run
+from tests.helpers import MBH, run_mbh, seed_rows
 
 #: Markup in a scenario name and in a method parameter (the escaping test's run).
 EVIL_SCENARIO = "<b>evil</b>&scene"
 EVIL_METHOD = "rk4+none:tol=<script>alert(1)</script>"
-
-
-MBH = [sys.executable, "-m", "harness.cli"]
-
-
-@pytest.fixture(scope="module")
-def small_run(tmp_path_factory) -> tuple[Path, str]:
-    """(results root, run id) of the tiny campaign run through ``mbh run`` (once per session:
-    the browser test's module reuses it)."""
-    folder = tmp_path_factory.getbasetemp() / "report_run"
-    if (folder / "run_id").is_file():
-        return folder / "results", (folder / "run_id").read_text(encoding="utf-8")
-    folder.mkdir()
-    campaign = folder / "report_test.toml"
-    campaign.write_text(CAMPAIGN, encoding="utf-8")
-    root = folder / "results"
-    done = subprocess.run([*MBH, "run", str(campaign), "--root", str(root), "--quiet",
-                           "--workers", "2"], capture_output=True, text=True, timeout=600)
-    assert done.returncode == 0, done.stderr
-    run_id = re.search(r"^run (\S+):", done.stdout, re.MULTILINE).group(1)
-    (folder / "run_id").write_text(run_id, encoding="utf-8")
-    return root, run_id
-
-
-def _seed_rows() -> list[dict]:
-    """A seed table in the shape of ``mbh seed-table --json`` (numbers invented for the test;
-    one value as the strict-JSON string "NaN")."""
-    rows = []
-    for scenario in ("fourbar_spatial", "slider_crank"):
-        for integrator in ("rk4", "rkn4", "bdf4"):
-            for stabilisation in ("none", "baumgarte", "direct"):
-                rows.append({"scenario": scenario, "integrator": integrator,
-                             "stabilisation": stabilisation, "status": "ok", "reason": "",
-                             "max_violation": 2e-3, "mean_violation": 1e-5,
-                             "max_energy_error_J": "NaN" if integrator == "rk4" else 10.0,
-                             "wall_time_s": 0.5, "newton_per_step": 3.0})
-    return rows
-
-
-def _mbh(*argv: str) -> tuple[int, str, str]:
-    """``mbh ARGV`` in this process: status, stdout, stderr."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        status = cli.main(list(argv))
-    return status, out.getvalue(), err.getvalue()
-
-
-@pytest.fixture(scope="module")
-def built(small_run, tmp_path_factory) -> dict[str, Path]:
-    """Both reports of the small run, built through ``mbh report`` (seed table stored beside
-    the run)."""
-    root, run_id = small_run
-    (root / run_id / "seed_table.json").write_text(json.dumps(_seed_rows()), encoding="utf-8")
-    out = tmp_path_factory.mktemp("report_out")
-    status, stdout, stderr = _mbh("report", run_id, "--root", str(root), "--out", str(out),
-                                  "--format", "html,pdf")
-    assert status == 0, stderr
-    assert stdout.split() == [str(out / "report.pdf"), str(out / "report.html")]  # HTML last
-    return {"html": out / "report.html", "pdf": out / "report.pdf"}
 
 
 @pytest.fixture(scope="module")
@@ -233,8 +138,8 @@ def test_both_reports_build_from_the_shipped_smoke_campaign(tmp_path):
                           capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stderr
     run_id = re.search(r"^run (\S+):", done.stdout, re.MULTILINE).group(1)
-    status, stdout, stderr = _mbh("report", run_id, "--root", str(root), "--out",
-                                  str(tmp_path / "out"), "--format", "html,pdf")
+    status, stdout, stderr = run_mbh("report", run_id, "--root", str(root), "--out",
+                                     str(tmp_path / "out"), "--format", "html,pdf")
     assert status == 0, stderr
     html = (tmp_path / "out" / "report.html").read_text(encoding="utf-8")
     for name in ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar",
@@ -299,9 +204,10 @@ def test_changes_against_a_previous_run(run_store, small_run, tmp_path):
 
     previous = _copy_run(run_store, tmp_path / "results", "report_test", before)
     # The copy started later, so the small run is the previous run of the copy, not vice versa.
-    assert build.previous_run(previous.run_id, root=tmp_path / "results") is None
+    campaign = previous.manifest["campaign"]
+    assert latest_run(campaign, tmp_path / "results", before=previous.run_id) is None
     shutil.copytree(root / run_id, tmp_path / "results" / run_id)
-    assert build.previous_run(previous.run_id, root=tmp_path / "results") == run_id
+    assert latest_run(campaign, tmp_path / "results", before=previous.run_id) == run_id
     report = build.collect(run_id, against=previous.run_id, root=tmp_path / "results")
     changes = {row[0]: row for row in report.changes.rows}
     assert changes["newly failing"][3] == "default" and changes["newly failing"][6] == "failed"
@@ -312,7 +218,7 @@ def test_seed_comparison_sets_ours_beside_theirs(run_store, built):
     from harness.report import seed_compare
 
     published = seed_compare.load_published()
-    table = seed_compare.comparison_table(published, _seed_rows())
+    table = seed_compare.comparison_table(published, seed_rows())
     rows = {(r[0], r[1], r[2], r[3]): r for r in table.rows}
     row = rows[("max constraint error (m ours)", "fourbar_spatial", "rk4", "none")]
     assert row[4] == 0.009848036 and row[5] == 2e-3 and row[6] == pytest.approx(2e-3 / 0.009848036)
@@ -336,8 +242,8 @@ def test_missing_or_bad_seed_table_is_said(run_store, tmp_path):
 
 def test_cli_errors_exit_2(small_run, tmp_path):
     root, run_id = small_run
-    status, _, stderr = _mbh("report", "no-such-run", "--root", str(root))
+    status, _, stderr = run_mbh("report", "no-such-run", "--root", str(root))
     assert status == 2 and "no run 'no-such-run'" in stderr and run_id in stderr
-    status, _, stderr = _mbh("report", run_id, "--root", str(root), "--format", "html,docx",
-                             "--out", str(tmp_path))
+    status, _, stderr = run_mbh("report", run_id, "--root", str(root), "--format", "html,docx",
+                                "--out", str(tmp_path))
     assert status == 2 and "unknown: docx" in stderr and not any(tmp_path.iterdir())

@@ -21,8 +21,6 @@ from pathlib import Path
 
 import pytest
 
-from tests.test_report import built, small_run  # noqa: F401  (fixtures)
-
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists()
                                         else None)
 pytestmark = pytest.mark.skipif(

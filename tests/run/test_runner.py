@@ -187,7 +187,7 @@ def check_sweep_row(sweeps: pd.DataFrame, campaign) -> None:
     assert len(sweeps) == 1
     row = sweeps.iloc[0]
     tried = json.loads(row["tried"])
-    for dt, status, error in tried:
+    for dt, _status, _error in tried:
         k = EVALUATION_STEP / dt
         assert k == pytest.approx(round(k), rel=1e-12)
         assert campaign.sweep.dt_min - 1e-15 <= dt <= campaign.sweep.dt_max + 1e-15

@@ -1,7 +1,8 @@
 """The result store (harness.store.runs): rows, parts, resume, cache, migration, listing, comparison.
 
 The committed fixture ``tests/data/store_v1/`` is a run written by :func:`write_v1_store` below,
-the schema-1 writer kept only here.  Regenerate it with ``.venv/bin/python tests/test_store.py``.
+the schema-1 writer kept only here.  Regenerate it with
+``.venv/bin/python -m tests.store.test_store``.
 """
 
 from __future__ import annotations
@@ -26,8 +27,9 @@ from harness.store import runs as store
 from harness.run.spec import load_campaign
 from harness.store.schema import SCHEMA_VERSION, SchemaError
 from harness.model.trajectory import Trajectory
+from tests.helpers import DATA
 
-V1_ROOT = Path(__file__).parent / "data" / "store_v1"
+V1_ROOT = DATA / "store_v1"
 V1_RUN = "20260101T000000Z-v1demo"
 
 

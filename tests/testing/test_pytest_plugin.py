@@ -1,8 +1,8 @@
 """The pytest plugin and the tolerance helpers, used the way a user uses them.
 
 User test files are written into a temporary folder and run by ``python -m pytest`` in a
-subprocess (the plugin is found through its ``pytest11`` entry point); the README's example is
-extracted from README.md and run the same way.  Helper behaviour that needs no subprocess is
+subprocess (the plugin is found through its ``pytest11`` entry point); the documented example
+suite is extracted from docs/formats/tolerances.md and run the same way.  Helper behaviour that needs no subprocess is
 checked in-process.  Cases are cheap: the four-bar over 0.5 s at dt 1e-3 or 1e-2 s.
 """
 
@@ -16,13 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.testing.cases import CaseResult, CaseRunner, ToleranceError, case_label, case_spec
+from harness.run.case import CaseResult
+from harness.testing.cases import CaseRunner, SessionCase, ToleranceError, case_label, case_spec
 from harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
                                 constraint_violation_series)
 from harness.model.trajectory import Trajectory
+from tests.helpers import ROOT
 
-README = Path(__file__).resolve().parent.parent / "README.md"
-SECTION = "## Tolerance assertions in your pytest suite"
+EXAMPLE_PAGE = ROOT / "docs" / "formats" / "tolerances.md"
+SECTION = "## An example suite"
 
 
 def run_pytest(folder: Path, *args: str) -> subprocess.CompletedProcess:
@@ -32,9 +34,9 @@ def run_pytest(folder: Path, *args: str) -> subprocess.CompletedProcess:
 
 
 def readme_files() -> dict[str, str]:
-    """The example files of the README's plugin section: every fenced block whose first line is
+    """The example files of the documentation's example suite: every fenced block whose first line is
     ``# <file name>`` (a .py or .toml file), by file name."""
-    text = README.read_text(encoding="utf-8")
+    text = EXAMPLE_PAGE.read_text(encoding="utf-8")
     section = text[text.index(SECTION):]
     section = section[:section.index("\n## ", len(SECTION))]
     files = {}
@@ -134,11 +136,11 @@ def test_convergence_order_outside_its_band_names_the_steps(runner):
         assert_convergence_order(results, 1.5, 2.5)
 
 
-def synthetic(method: str, wall_time_s: float, calibration_s: float) -> CaseResult:
+def synthetic(method: str, wall_time_s: float, calibration_s: float) -> SessionCase:
     """A finished case with a given wall time and session calibration time (no run)."""
     spec = case_spec("fourbar", "inhouse", method, 1e-3, 0.5)
-    return CaseResult(spec, {"wall_time_s": wall_time_s}, Trajectory.empty(3), None, None,
-                      lambda: calibration_s)
+    return SessionCase(spec, CaseResult(Trajectory.empty(3), {}, {"wall_time_s": wall_time_s}),
+                       None, None, lambda: calibration_s)
 
 
 def test_speed_is_compared_by_calibrated_time_ratio():

@@ -2,10 +2,10 @@
 
 Every tolerance below was measured on this machine (exudyn 1.13.6) with margin; the measured value
 sits next to it.  Reproduce the numbers with ``.venv/bin/python -m pytest
-tests/test_exudyn_adapter.py -m "slow or not slow" -v``.
+tests/adapters/exudyn/test_exudyn_adapter.py -m "slow or not slow" -v``.
 
 Constraint violations and energies are computed by the harness (``harness.measure.metrics``,
-``harness.measure.energy``) from the body states the adapter returns (DESIGN.md rule 2), never from
+``harness.measure.energy``) from the body states the adapter returns (docs/design.md, rule 2), never from
 Exudyn's residuals.
 """
 
@@ -15,7 +15,7 @@ import dataclasses
 
 import numpy as np
 import pytest
-from conftest import VERIFIED_SCENES
+from tests.helpers import VERIFIED_SCENES
 
 from adapters.base import RunFailure, UnsupportedCase
 from adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
@@ -36,7 +36,7 @@ from harness.neutral.dynamics import IndeterminateAccelerations, accelerations
 from harness.model.outputs import output_series
 from harness.model.scenario import load, scenario_names
 from harness.model.trajectory import Trajectory
-from test_generated_mechanisms import ACCELERATION_TOLERANCE, measured_acceleration_gap
+from tests.helpers import ACCELERATION_TOLERANCE, measured_acceleration_gap
 
 
 

@@ -25,8 +25,8 @@ from adapters.inhouse import compiled
 from adapters.inhouse.linalg import certified_spd_solve, min_norm_solve, truncated_solve
 from harness.model import scenario
 from harness.model.timegrid import sample_times
+from tests.helpers import LARGE_TRACES, PATH_BOUND
 
-PATH_BOUND = 1e-10  # m and m/s (rad, rad/s on angles' velocities), see the module docstring
 METHODS = ("rk4+direct:proj_tol=1e-15", "rkn4+baumgarte", "heun+none", "rk4+partition",
            "rk8+direct")
 
@@ -39,10 +39,6 @@ def _run(name: str, method: str, loop: str):
     return get_adapter("inhouse").simulate(mech, f"{method}{separator}loop={loop}", dt, t_end,
                                            sample_times(dt, t_end, mech.sample_step))
 
-
-#: Scenes whose generated functions take longest to compile (~30 s a scene on a machine that has
-#: not compiled them yet): their generated loops run in the slow suite.
-LARGE_TRACES = ("andrews", "fourbar_spatial")
 
 SCENE_LOOPS = [pytest.param(name, loop, marks=pytest.mark.slow)
                if loop == "generated" and name in LARGE_TRACES else (name, loop)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import VERIFIED_SCENES
+from tests.helpers import VERIFIED_SCENES
 
 from adapters import get_adapter
 from harness.model import scenario

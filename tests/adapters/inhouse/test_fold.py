@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import reduced_tip
-from test_compiled_path import PATH_BOUND
+from tests.helpers import reduced_tip
+from tests.helpers import PATH_BOUND
 
 from adapters import get_adapter
 from adapters.inhouse.fold import (SAFE_INDICATOR, passage_placement, passage_times,
@@ -121,7 +121,7 @@ def test_partition_passes_the_first_two_crossings():
                                     "rk4+partition"])
 def test_both_paths_place_the_same_passage(method):
     """The compiled loop and the Python path plan the passage at 0.71 s alike and take the same
-    steps through it (to the bound of tests/test_compiled_path.py)."""
+    steps through it (to the bound of tests/adapters/inhouse/test_compiled_path.py)."""
     mech = scenario.load("double_fourbar")
     runs = [get_adapter("inhouse").simulate(mech, f"{method}{',' if ':' in method else ':'}"
                                             f"loop={loop}", 1e-3, 0.8,

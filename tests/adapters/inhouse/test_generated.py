@@ -25,7 +25,7 @@ from harness.model import scenario
 from harness.neutral.assembly import AssemblyError
 from harness.testing.strategies import mechanisms
 from harness.model.timegrid import sample_times
-from tests.test_compiled_path import LARGE_TRACES, PATH_BOUND
+from tests.helpers import LARGE_TRACES, PATH_BOUND
 
 RELATIVE_BOUND = 1e-13
 

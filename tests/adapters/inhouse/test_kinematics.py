@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from adapters.inhouse.constraints import ConstraintSystem, layout_of
-from adapters.inhouse.kinematics import AssemblyError, assemble, check, rank_report
+from adapters.inhouse.kinematics import InhouseAssemblyError, assemble, check, rank_report
 from harness.model import scenario
 
 SHIPPED = scenario.scenario_names()
@@ -49,7 +49,7 @@ def test_jacobian_matches_finite_differences(mechanism):
     for _ in range(5):
         q, _ = random_state(mechanism, rng)
         t = rng.uniform(0, 2)
-        numeric = central_difference(lambda x: system.phi(x, t), q, 1e-6)
+        numeric = central_difference(lambda x, t=t: system.phi(x, t), q, 1e-6)
         analytic = system.jacobian(q, t)
         # Central differences with h = 1e-6: measured max error 3.0e-10 relative to max |Φ_q|
         # over the shipped scenarios (a wrong derivative gives O(1) errors).
@@ -84,7 +84,8 @@ def test_assembly_residual_and_mobility(name):
     result = check(scenario.load(name))
     assert result["assembly_residual"] <= 1e-12
     assert result["mobility"] == 1
-    overconstrained = {"bricard": (0, 1)}  # Grübler 0, one redundant row: tests/test_bricard.py
+    # Grübler 0, one redundant row: tests/references/test_bricard.py
+    overconstrained = {"bricard": (0, 1)}
     assert (result["grubler_mobility"], result["redundant_equations"]) \
         == overconstrained.get(name, (1, 0))
 
@@ -198,7 +199,7 @@ def test_a_link_too_short_to_close_the_loop_is_reported(load_variant):
         ('location = [2.5, 0.0, 0.0]',
          'location = [4.110282120429277, 2.531203566018702, 0.0]\nlocation2 = [2.5, 0.0, 0.0]')],
         stem="fourbar_short_rocker")
-    with pytest.raises(AssemblyError) as error:
+    with pytest.raises(InhouseAssemblyError) as error:
         assemble(mech)
     message = str(error.value)
     assert "fourbar_short_rocker.toml" in message

@@ -8,7 +8,7 @@ import dataclasses
 import mujoco
 import numpy as np
 import pytest
-from conftest import VERIFIED_SCENES
+from tests.helpers import VERIFIED_SCENES
 from scipy.spatial.transform import Rotation
 
 from adapters.base import UnsupportedCase

@@ -1,13 +1,13 @@
 """The Pinocchio adapter: build, start, faithfulness switches, accuracy and failure reporting.
 
 Tolerances come from measurements on this machine (numbers in the comments, run with
-``.venv/bin/python -m pytest tests/test_pinocchio_adapter.py``), with a margin of 3–10×.
+``.venv/bin/python -m pytest tests/adapters/pinocchio/test_pinocchio_adapter.py``), with a
+margin of 3–10×.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
@@ -25,6 +25,7 @@ from harness.neutral.dynamics import accelerations, start_accelerations
 from harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
 from harness.model.outputs import output_series
 from harness.model.scenario import load, scenario_names
+from tests.helpers import DATA
 
 ADAPTER = get_adapter("pinocchio")
 
@@ -312,7 +313,7 @@ def test_unreachable_start_fails_with_reason(monkeypatch):
 
 
 def _nfourbar():
-    return load(Path(__file__).parent / "data" / "nfourbar_breadth_first.toml")
+    return load(DATA / "nfourbar_breadth_first.toml")
 
 
 def test_every_subtree_has_contiguous_velocity_indices():

@@ -7,12 +7,11 @@ measured and the margin.
 from __future__ import annotations
 
 import dataclasses
-from pathlib import Path
 
 import numpy as np
 import pybullet
 import pytest
-from conftest import VERIFIED_SCENES
+from tests.helpers import DATA, VERIFIED_SCENES
 
 from adapters.base import UnsupportedCase
 from adapters.pybullet_adapter import PybulletAdapter, bullet_world
@@ -332,7 +331,7 @@ def test_body_loads_are_applied_every_step(load, rate):
 # --- declaration order (issue 9: the N-four-bar declared breadth-first) -------------------------
 
 def _nfourbar():
-    return load(Path(__file__).parent / "data" / "nfourbar_breadth_first.toml")
+    return load(DATA / "nfourbar_breadth_first.toml")
 
 
 def test_breadth_first_declaration_starts_at_the_harness_state():
