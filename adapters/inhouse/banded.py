@@ -31,10 +31,9 @@ from scipy.sparse.csgraph import reverse_cuthill_mckee
 from adapters.inhouse.linalg import (CERTIFICATE_MARGIN, gram_condition_bound, min_norm_solve,
                                      min_norm_solve_and_bound)
 
-#: From this many constraint rows on the banded solves are used.  Measured on n_fourbar@N at the
-#: start (µs per acceleration solve, dense / banded; per projection solve likewise): 14 rows
-#: 2.6 / 3.9 (2.0 / 3.8), 20 rows 4.4 / 5.1, 26 rows 6.9 / 6.4 (5.9 / 6.1), 38 rows 16.9 / 10.7,
-#: 50 rows 46.8 / 12.1, 98 rows 4147 / 67 (the dense certificate fails there: SVD).
+#: From this many constraint rows on the banded solves are used: on n_fourbar@N the dense and
+#: banded solves cost about the same near 26 rows, and the banded ones win from there on
+#: (figures: docs/measurements.md, section "In-house step cost").
 BANDED_MIN_ROWS = 30
 
 

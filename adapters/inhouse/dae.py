@@ -39,9 +39,8 @@ Jacobian
 block: the constant and linear blocks exactly (I, M, Φ_q, Φ_qᵀ) and the derivatives of
 M(q) v̇ − Q(q, v) + Φ_qᵀ λ, Φ_qᵀ μ and Φ_q v with respect to q and of Q with respect to v by
 forward differences of the compiled kernels (2n kernel evaluations).  ``jacobian="ida"`` leaves
-the matrix to IDA's difference quotients over all 2n + 2m columns.  Measured over 4 s at rtol
-1e-10, atol 1e-12 (CPU time of the whole run, similar step counts): ``fourbar`` (planar, n = 9,
-m = 8) kernels 2.9 s, ida 3.5 s; ``fourbar_spatial`` (n = 21, m = 21) kernels 3.9 s, ida 7.5 s.
+the matrix to IDA's difference quotients over all 2n + 2m columns, which costs more the larger
+the system (figures: docs/measurements.md, section "Integrators").
 
 Redundant constraint equations
 ------------------------------

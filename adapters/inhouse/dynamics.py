@@ -461,10 +461,9 @@ def solve_augmented(mass, jacobian, force, gamma):
 
 #: Singular values of the range-space matrix Φ_q M̃⁻¹ Φ_qᵀ below this fraction of the largest are
 #: left out of the acceleration solve (:func:`range_space_acceleration`).  It scales as σ(Φ_q)²:
-#: directions of Φ_q below ~1e-5 of its largest singular value.  Measured on double_fourbar's
-#: first singular passage (rk4+direct, 0.8 s, tip error at dt 1e-4 / 1e-5): the plain LU solve
-#: of eq. 77: 4.7e-7 / 1.7 m over 1.5 s (a branch lost at the second passage); cut 1e-12:
-#: 4.1e-13 / 1.4e-9 m; 1e-10: 4.1e-13 / 1.1e-10 m; 1e-9: 1.9e-10 / 7.5e-10 m.
+#: directions of Φ_q below ~1e-5 of its largest singular value.  On double_fourbar's first
+#: singular passage 1e-10 is the most accurate cut tried; the plain LU solve of eq. 77 loses the
+#: branch (figures: docs/measurements.md, section "In-house formulation").
 ACCELERATION_CUT = 1e-10
 
 

@@ -17,12 +17,10 @@ the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION
 :data:`MAX_OPERATIONS`, a kernel path through LAPACK (the banded solves of planar systems with
 30 rows or more, the SVD of a system without a certificate at the start) — each with a note.
 
-Measured (one call in a compiled loop, this machine): the right-hand side of the planar four-bar
-0.21 µs against the kernel's 1.9 µs (704 operations, 21 guards); of the spatial slider-crank
-1.1 µs against 5.1 µs (6,798 operations, 105 guards).  The cost is the first compilation, ~1 s
-and ~7 s for those two and as much again for the projection's parts, paid once per formulation
-and machine: the source goes to :func:`cache_directory` under a name made of its hash, where
-numba caches the compiled function next to it.
+A generated right-hand side is several times faster than the kernel (figures:
+docs/measurements.md, section "In-house step cost").  The cost is the first compilation, seconds
+per function, paid once per formulation and machine: the source goes to :func:`cache_directory`
+under a name made of its hash, where numba caches the compiled function next to it.
 
 The traced state is the formulation's start, its coordinates moved by ~1e-6 and its velocities
 by ~1 in a fixed pseudo-random direction, so that no entry is zero there by the start's symmetry

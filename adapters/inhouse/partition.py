@@ -12,9 +12,9 @@ condition number exceeds ``cond_ratio`` times that of the split full pivoting wo
 current configuration (checked after every step): an independent coordinate that reaches an
 extremum (the four-bar coupler's x, an Euler parameter, the slider at dead centre) makes the block
 singular there.  Switching late costs accuracy long before it costs the branch: near the fold the
-reduced ODE's derivatives grow, and the Runge–Kutta error constant with them.  Measured on the
-spatial slider-crank (RK4, Δt = 1e-3, 1 s): cond_ratio 2 → 1.7e-6 rad, 1.01 → 6.6e-9 rad, the same
-number of re-partitions; 1.001 is no better than 1.01.  A re-partition restarts the integrator (multistep
+reduced ODE's derivatives grow, and the Runge–Kutta error constant with them, so the default
+``cond_ratio`` switches at a 1 % advantage (figures: docs/measurements.md, section "In-house
+formulation").  A re-partition restarts the integrator (multistep
 history is lost).
 """
 
@@ -39,15 +39,11 @@ class CoordinatePartitioning(Formulation):
     #: the Φ_q of the re-partition check, with every row kept only: a start that dropped
     #: redundant rows places none).  At a crossing every dependent block is singular, so the
     #: reduced equations lose accuracy near it like the index-1 ones do.  The clearance is
-    #: chosen on double_fourbar (first 1.5 s, tip error at dt 1e-3 / 1e-4 / 1e-5 s): 1e-4 gave
-    #: 7.9e-10 / 8.2e-10 / 6.0e-10 m, 1e-3 gave 6.0e-11 / 6.3e-11 / 9.3e-11 m, 3e-3 and 1e-2 the
-    #: same ~6e-11 floor (plain grid: 4.3e-9 / 1.1e-5 / 2.6e-6 m).  On parallelogram_fourbar (10 s,
-    #: dt 1e-2 / 1e-3 / 1e-4 s) 1e-3 gave 1.3e-7 / 3.7e-8 / 5.8e-7, 1e-4 gave 1.3e-7 / 1.2e-7 /
-    #: 4.7e-7, the plain grid 4.4e-5 / 2.0e-5 / 3.9e-3: the error still grows at each of its 12
-    #: crossings there (``direct``: 3e-11).  Each passage of that bifurcation adds an energy
-    #: error (dt 1e-4 s: 1.2e-10 J at the first, 1.3e-9 J after the second; ``direct`` ~2e-13 J)
-    #: that the motion turns into a crank-angle error growing between crossings; why partition's
-    #: step does that there is not found yet.
+    #: chosen on double_fourbar, where 1e-3 reaches the error floor that larger clearances keep.
+    #: On parallelogram_fourbar the error still grows at each of its 12 crossings (each passage
+    #: of that bifurcation adds an energy error that the motion turns into a crank-angle error
+    #: growing between crossings); why partition's step does that there is not found yet.
+    #: Figures: docs/measurements.md, section "In-house formulation".
     places_passages = True
     passage_clearance = 1e-3
 

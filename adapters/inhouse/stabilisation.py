@@ -296,13 +296,10 @@ class _Projection(Formulation):
     configuration that meets Φ only to a residual ε sits on the hyperbola ψ·b = ε, and a full
     projection of the velocity there turns it towards the other branch (a rate error ≈ εV/ψ²
     at a distance ψ from the crossing, which small steps come close to).  Truncated, the
-    projection leaves the lost direction to the integrator while σ is small.  Measured on
-    double_fourbar (rk4+direct on the plain grid, before placed passages, start conditioning 0.2,
-    with the acceleration cut :data:`~adapters.inhouse.dynamics.ACCELERATION_CUT`; largest tip
-    error over 10 s at dt 1e-4):
-    proj_tol 1e-12 with singular_cut 5e-3: 1.4e-5 m; proj_tol 1e-15 with singular_cut 1e-3,
-    5e-3, 2e-2, 5e-2, 1e-1: 9.3e-6, 3.4e-7, 4.8e-8, 7.1e-9, 1.2e-8 m.  A tight proj_tol matters
-    as much: Newton stopped at |Φ| = ε leaves the state on the hyperbola ψ·b = ε.
+    projection leaves the lost direction to the integrator while σ is small; the default
+    ``singular_cut`` 5e-2 is the most accurate of those tried on double_fourbar (figures:
+    docs/measurements.md, section "In-house formulation").  A tight proj_tol matters as much:
+    Newton stopped at |Φ| = ε leaves the state on the hyperbola ψ·b = ε.
     """
 
     defaults = {"proj_tol": 1e-12, "proj_max_iter": 10, "singular_cut": 5e-2}

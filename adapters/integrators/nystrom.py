@@ -374,12 +374,10 @@ class RK5(NystromIntegrator):
 
     The six-stage solution formula of RK45 (J. R. Dormand, P. J. Prince, *A family of embedded
     Runge–Kutta formulae*, J. Comput. Appl. Math. 6, 1980; Hairer, Nørsett, Wanner I, §II.5)
-    without its error estimator: between RK4 and RK8 on the front (measured at dt = 1e-2 s: 4.7e-3
-    rad on fourbar against RK4's 1.5e-2, 6.7e-5 on slider_crank against 1.3e-2).  SciPy's
+    without its error estimator: between RK4 and RK8 in accuracy on the front.  SciPy's
     coefficients (``scipy.integrate.RK45``'s ``C``, ``A``, ``B``; ``A`` lacks the last, all-zero
-    column of the square tableau).  Like :class:`RK8`, not for singular passages: with ``direct``
-    on double_fourbar (10 s) it is 2.0e-8 m off at dt = 1e-2 s but 5.3e-2 m at 1e-3 s (measured
-    2026-11-25).
+    column of the square tableau).  Like :class:`RK8`, not for singular passages: its error there
+    grows as the step shrinks (figures: docs/measurements.md, section "Integrators").
     """
 
     name = "rk5"

@@ -10,9 +10,9 @@ with the step size it had proposed as its first step (LSODA, which does not expo
 own).  The restart is paid for honestly: the counters add up
 over every solver instance (RK45/DOP853 re-evaluate f at the start, BDF/LSODA drop back to order 1
 and Radau/BDF recompute the Jacobian).  With the identity projection nothing is restarted.
-Measured on a unit-circle orbit to t = 1 (rtol 1e-6) with a projection that changes the state
-every step, steps with/without the restarts: rk45 7/7, dop853 3/3, radau 11/11, but bdf 617/27
-and lsoda 1601/30 — the multistep solvers never leave order 1.  Prefer the one-step solvers (or
+With a projection that changes the state every step the multistep solvers (bdf, lsoda) never
+leave order 1 and take many times the steps, the one-step solvers the same (figures:
+docs/measurements.md, section "Integrators").  Prefer the one-step solvers (or
 the fixed-step methods) when the problem projects.
 
 Counters
@@ -49,10 +49,9 @@ class ScipyIntegrator(Integrator):
     min_step_ratio : float
         The run fails (:class:`StepFailure`, "step-size collapse") as soon as the solver's next
         step falls below ``min_step_ratio · dt`` (default 1e-5: 1e-8 s for a 1e-3 s hint).
-        Without it a solver that cannot pass a singular configuration crawls on: measured,
-        dop853+direct at rtol 1e-10 on double_fourbar's first passage (t = 0.71436 s) fell to
-        steps of 1e-9 s within 100 steps and then took 59 000 steps of ~1e-12 s for 60 s of
-        wall time before SciPy gave up.
+        Without it a solver that cannot pass a singular configuration crawls on at steps of
+        ~1e-12 s for a minute before SciPy gives up (figures: docs/measurements.md, section
+        "Integrators").
     """
 
     adaptive = True

@@ -14,14 +14,10 @@ The projection factors the closure Jacobian J (m × nv) once, at the configurati
 arrived at, as its pseudo-inverse J⁺ from a singular value decomposition truncated at
 :data:`RANK_RTOL` · σ_max: rank-revealing, so redundant closure rows (the planar revolute closed
 by a 3-D point, Bricard's loop) cost nothing.  The Gauss–Newton iterations reuse J⁺, a chord
-iteration: the configuration moves by about the residual (measured at most 6.3e-8 m after an
-RK4 step of 1e-3 s on the verified scenes, 2.2e-3 m after one of 1e-2 s), so J changes by about
-that relative amount, and the iteration took as many iterations as Newton's (917, 1809 and 2993
-over 4 s of fourbar, slider_crank and slider_crank_planar at 1e-3 s, before and after).  The
-velocity is projected with the same J⁺ applied to J v at the final configuration; the velocity
-violation stays at round-off (measured 3.6e-14 and 4.4e-14 m/s on fourbar and
-slider_crank_planar at 1e-3 s over 4 s, against 3.3e-14 and 1.5e-14 with a fresh
-``numpy.linalg.lstsq`` per solve, the former path).
+iteration: the configuration moves by about the residual, so J changes by about that relative
+amount, and the iteration takes as many iterations as Newton's.  The velocity is projected with
+the same J⁺ applied to J v at the final configuration; the velocity violation stays at round-off,
+as with a fresh least-squares solve.  Figures: docs/measurements.md, section "Engines".
 """
 
 from __future__ import annotations
@@ -255,11 +251,11 @@ class ConstrainedProblem:
 
 
 #: Singular values of a closure Jacobian at or below this fraction of the largest count as zero.
-#: Redundant rows leave round-off, not zeros: Bricard's fifth singular value was measured at
-#: 8.2e-15 and 1.7e-14 of the largest in its first two steps of dt = 1e-2, above the
-#: eps · max(m, nv) = 1.3e-15 of ``numpy.linalg.lstsq(rcond=None)``; kept, it turned a 1.4e-12 m
-#: residual into a 2.3 m step.  A direction 1e-10 below the largest could only be corrected by a
-#: step 1e10 times the residual, which is no correction either.
+#: Redundant rows leave round-off, not zeros (on Bricard's loop above the eps · max(m, nv) cut-off
+#: of ``numpy.linalg.lstsq(rcond=None)``, where kept it turned a ~1e-12 m residual into a
+#: metres-long step; figures: docs/measurements.md, section "Engines").  A direction 1e-10 below
+#: the largest could only be corrected by a step 1e10 times the residual, which is no correction
+#: either.
 RANK_RTOL = 1e-10
 
 
@@ -268,8 +264,8 @@ def pseudo_inverse(jacobian: np.ndarray) -> np.ndarray:
 
     Singular values at or below :data:`RANK_RTOL` · σ_max count as zero, so J⁺ r is the
     minimum-norm least-squares solution with redundant rows (rank-deficient J) ignored.
-    ``numpy.linalg.pinv(jacobian, rcond=RANK_RTOL)`` is the same matrix (measured 2.2e-16 apart)
-    at 12.8 µs against 10.1 µs a call on a 5 × 3 Jacobian, paid once a step on Pinocchio's clock.
+    ``numpy.linalg.pinv(jacobian, rcond=RANK_RTOL)`` is the same matrix to round-off, but slower;
+    this is paid once a step on Pinocchio's clock.
     """
     u, sigma, vt = np.linalg.svd(jacobian, full_matrices=False)
     kept = sigma > RANK_RTOL * sigma[0]

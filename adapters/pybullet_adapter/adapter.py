@@ -40,15 +40,11 @@ _ENGINE_DEFAULTS = {
     "warmStartingFactor": 0.1,
     "numNonContactInnerIterations": 1,
 }
-#: The most accurate solver settings measured at a given step (see the report): full error
+#: The most accurate solver settings found at a given step (see the report): full error
 #: reduction of the loop closure, more iterations.  The MLCP solvers (PGS, Dantzig) do worse on
 #: these loops: PGS blows up, Dantzig leaves the loop open.  The residual early exit stays at
-#: Bullet's default 1e-7: measured 2026-11-24 over 4 s, max crank-angle error against the reference
-#: with threshold 0 / 1e-7 (rad): fourbar 2.895e-2 / 2.896e-2 at dt = 1e-3, 2.642e-3 / 2.643e-3 at
-#: 1e-4; fourbar_spatial 2.895e-2 / 2.898e-2, 2.642e-3 / 2.644e-3; slider_crank 0.5194 / 0.5194,
-#: 5.435e-2 / 5.436e-2; slider_crank_planar 0.3950 / 0.3949, 6.396e-2 / 6.396e-2 — the same
-#: to 0.1 %, as are the loop-closure drifts (fourbar 2.098e-4 / 2.098e-4 m at 1e-3), at a third
-#: of the time per step (19–26 µs with threshold 0, 6–8 µs with 1e-7).
+#: Bullet's default 1e-7: threshold 0 is no more accurate (errors and drifts the same to 0.1 %)
+#: and three times slower per step (figures: docs/measurements.md, section "Engines").
 _BEST = {**_ENGINE_DEFAULTS, "numSolverIterations": 200, "erp": 1.0}
 #: ``best`` with ten Bullet sub-steps per step (ten times the work per step).
 _SUBSTEPS = {**_BEST, "numSubSteps": 10}

@@ -13,17 +13,14 @@ Two loads have no such coordinate: a world torque on a spatial body (power τ·�
 dissipation (power −c L̇²).  Their power is sampled and integrated exactly after interpolation by
 a spline of degree :data:`QUADRATURE_DEGREE` with not-a-knot ends (:func:`cumulative_quadrature`),
 a quadrature of order :data:`QUADRATURE_DEGREE` + 1 in the sample spacing h for a smooth power, on
-any increasing sample times.  Measured on cos(ωt) sampled every h = 10 ms over 4 s, the largest
-error of the running integral relative to its amplitude 1/ω is 2.7e-14 at hω = 0.1, 4.5e-11 at
-0.2 and 2.3e-8 at 0.4 (the trapezoidal rule, used before: (hω)²/12 ≈ 8e-4 at 0.1); on a damped
-spring–mass (tests/measure/test_energy.py) 4.2e-13 of the largest kinetic energy at 10 ms.
+any increasing sample times: at hω ≤ 0.1 the running integral is exact to round-off, far
+beyond the trapezoidal rule's (hω)²/12 (figures: docs/measurements.md, section "Energy
+bookkeeping").
 
-A fast passage that the samples do not resolve still costs accuracy (a four-bar with a damper
-through a near-toggle passage: 5e-8 to 5e-5 at 10 ms).  Given a reference on a denser grid,
-:func:`energy_balance` therefore takes the reference's work, integrated on its own grid, and
-integrates only the difference of the powers at the samples (a control variate): measured on the
-same scene, 5.7e-13 (planar) and 5.8e-11 (spatial) of the largest kinetic energy
-(tests/measure/test_metrics.py).
+A fast passage that the samples do not resolve still costs accuracy.  Given a reference on a
+denser grid, :func:`energy_balance` therefore takes the reference's work, integrated on its own
+grid, and integrates only the difference of the powers at the samples (a control variate), which
+brings such a passage back to near round-off (tests/measure/test_metrics.py).
 
 :func:`interval_work` is the two-state version for a stepper that only holds the previous and the
 current state: exact for the same loads, the trapezoidal rule (second order) for the others.

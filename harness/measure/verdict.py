@@ -41,20 +41,9 @@ are wrong by that much).  A branch switch moves bodies by a sizeable fraction of
 reference's branch, so 10 % separates the two with margin on either side.  A run whose bodies are
 10 % of the mechanism's size from where the reference has them at the same time is wrong by as
 much as a branch switch; below that, how far it is off is a question of accuracy, reported as its
-error against the reference (measured: on fourbar and slider_crank every in-house and engine run
-of the bench campaign within 10 % stays below 7 %; PyBullet on slider_crank reaches 20–54 %, and
-MuJoCo ``best`` at dt 1e-2 s 19 %, all of them ``ok`` before this check).  The turn bound
-withdrew ``ok`` from 13 of the 812 ``ok`` rows of a nightly run (and 8 of 253 of the hard
-campaign), each with its main output 0.12–0.90 rad off, among them Andrews' crank at dt 1e-3 s
-(in-house rk4/rkn4 with direct or partition, MuJoCo ``best``: 0.58–0.90 rad, while its points
-stayed within 5.3–7.9 % of the size); the largest main-output error of an in-house ``ok`` row
-left there is 0.069 rad.  Measured at these
-bounds: in-house, MuJoCo, Pinocchio and Exudyn ``best`` on the four-bar (dt 1e-3 s, 1 s) stay
-≥ 100 times below every bound; at dt 1e-2 s over 4 s, MuJoCo ``default`` reaches a 0.39 % gap and
-6.2 % energy error, PyBullet ``default`` 29 %, Exudyn ``default`` 23 % (all failed); the seed's
-unstabilised rk4+none drifts to a 6 % gap on the spatial slider-crank (failed), and in-house
-``default`` (rk4+baumgarte) at dt 1e-2 s opens the planar slider-crank's joints by 1.6 % (failed).
-On the double four-bar (dt 1e-3 s) every ``best`` stays ≥ 38 times below every bound.
+error against the reference.  The accurate runs (every ``best`` at dt 1e-3 s) stay well over an
+order of magnitude below every bound, while the known-inaccurate defaults at dt 1e-2 s fail it
+(figures: docs/measurements.md, section "Verdict bounds").
 """
 
 from __future__ import annotations

@@ -32,8 +32,8 @@ from harness.common.errors import MbhError
 
 #: Newton stops, and a start is accepted, when max |residual| ≤ this × max(1, L), in m or rad, with
 #: L (m) the mechanism's size (largest |coordinate| of a reference position or joint point).  The
-#: residual after convergence is round-off, ~1e-16·L (measured ≤ 8.9e-16 on the shipped scenes at
-#: three driver values, L ≤ 4.7 m), so this leaves > 1000× margin and still means "assembled to
+#: residual after convergence is round-off, ~1e-16·L (figures: docs/measurements.md, section
+#: "Assembly and rank analysis"), so this leaves > 1000× margin and still means "assembled to
 #: machine precision" for any physical purpose.
 POSITION_TOLERANCE = 1e-12
 #: Newton iterations before giving up (the shipped scenes need 0–4).
@@ -42,9 +42,8 @@ MAX_ITERATIONS = 50
 POLISH_STEPS = 2
 #: The velocity conditions hold when max |J ν − b| ≤ this × max(1, max |b|) (m/s or rad/s).  A
 #: consistent system solved in least squares leaves at most ~1e-16·κ·|b| with κ ≤ CONDITION_LIMIT
-#: = 1e6 accepted, i.e. ≤ ~1e-10 in the worst accepted case, and ≤ 1.8e-15 measured on the shipped
-#: scenes; an inconsistent prescription misses by the inconsistency itself (0.079 m/s in the report
-#: that motivated this check).
+#: = 1e6 accepted, i.e. ≤ ~1e-10 in the worst accepted case (round-off on the shipped scenes); an
+#: inconsistent prescription misses by the inconsistency itself, orders of magnitude more.
 VELOCITY_TOLERANCE = 1e-9
 
 

@@ -29,12 +29,9 @@ from harness.neutral.mobility import independent_rows
 from harness.model.trajectory import Trajectory
 
 #: Fraction of its median at or below which a local minimum of σ_r/σ_1 counts as a near-singular
-#: position.  Measured on the shipped references (1 ms samples): double_fourbar's ten flattened
-#: passages dip to 5.1e-4 … 2.1e-3 of its median 0.167, the four-cell N-four-bar's first two to
-#: 1.2e-4 and 4.0e-4 of its median; Andrews' squeezer, bricard and slider_crank_planar never fall
-#: below 0.85 of theirs (Andrews' ratio is 0.0026–0.0036 throughout: rows of very different
-#: scales, not a singularity).  The factor lies 4.7× above the shallowest passage and 85× below
-#: the deepest dip of a scene without one.
+#: position.  On the shipped references the factor lies 4.7× above the shallowest passage and
+#: 85× below the deepest dip of a scene without one (figures: docs/measurements.md, section
+#: "Neutral dynamics").
 SINGULAR_DROP = 1e-2
 #: A failure within this many seconds of a near-singular position happened *at* it: five of the
 #: largest steps a campaign uses (1e-2 s), so that an integrator that gives up a few steps before

@@ -53,16 +53,16 @@ DIFFERENCE_STEP = 1e-3
 DIFFERENCE_TURN = 1e-2
 _TORQUE_JOINTS = ("revolute", "cylindrical")
 #: Smallest ratio of the least to the largest eigenvalue of the mass matrix on the null space of
-#: G for which the accelerations count as unique.  Measured over 3000 generated mechanisms
-#: (:mod:`harness.testing.strategies`): smallest ratio 6.9e-4; a bar free to spin about its own axis gives
-#: exactly 0 (and 3e-12 with an axial moment of 1e-12 kg·m²).
+#: G for which the accelerations count as unique: generated mechanisms
+#: (:mod:`harness.testing.strategies`) stay five orders of magnitude above it, a bar free to spin
+#: about its own axis falls below it (figures: docs/measurements.md, section "Neutral dynamics").
 UNIQUENESS_RATIO = 1e-9
 #: Relative cut-off of the singular values in the KKT least-squares solve.  Redundant joint
 #: equations give singular values at round-off (≈ 1e-16 of the largest); LAPACK's default
 #: cut-off sits right there, so off the constraint manifold a redundant direction flips in and out
-#: of the solution and the accelerations jump (measured: DOP853 stalled at 1e-6 s steps on the
-#: N-four-bar with its branch rows).  Genuine singular values of the scenes are ≥ 1e-6 of the
-#: largest (the assembly refuses a start with condition > 1e6).
+#: of the solution and the accelerations jump (DOP853 then stalls on the N-four-bar with its
+#: branch rows).  Genuine singular values of the scenes are ≥ 1e-6 of the largest (the assembly
+#: refuses a start with condition > 1e6).
 KKT_RCOND = 1e-12
 
 

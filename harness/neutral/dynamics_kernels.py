@@ -282,7 +282,8 @@ def kkt_solve(mass, jacobian, forces, rows, rcond):
 
     The system is symmetric, so its singular values are the moduli of its eigenvalues: the
     least-norm solution V Λ⁺ Vᵀ b from the symmetric eigendecomposition is the one LAPACK's
-    gelsd returns from the SVD with the same cut-off (1.5x faster at 60 × 60, measured).
+    gelsd returns from the SVD with the same cut-off, and cheaper (figures: docs/measurements.md,
+    section "Neutral dynamics").
     """
     n, m = mass.shape[0], jacobian.shape[0]
     kkt = np.zeros((n + m, n + m))

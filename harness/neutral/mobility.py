@@ -26,22 +26,21 @@ from harness.neutral.equations import JointEquations
 from harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
 
 #: A pivot |R_kk| of the QR factorisation of Jᵀ below this fraction of the largest counts as zero.
-#: Round-off puts dependent rows' pivots at ~1e-16·|J| (measured ≤ 1e-15 on the shipped scenes'
-#: redundant variants); a configuration within ~1e-9 rad (or m per m of link) of a singular position
+#: Round-off puts dependent rows' pivots at ~1e-16·|J| (≤ 1e-15 on the shipped scenes' redundant
+#: variants); a configuration within ~1e-9 rad (or m per m of link) of a singular position
 #: is counted as singular, which is the accuracy a start must have anyway.
 RANK_TOLERANCE = 1e-9
 #: A configuration whose condition number of [independent rows; driver row] exceeds this is
 #: singular: ``mbh check`` warns and the assembly refuses the start.  Near a singular position the
-#: condition grows like c/δ with δ the distance to it; on the N-four-bar (cranks horizontal)
-#: measured 9.0e3, 9.0e4 and 9.0e5 at δ = 1e-3, 1e-4 and 1e-5 rad, and Newton converging onto the
-#: singular position itself stops ~1e-7 away (the residual is quadratic in δ there), measured
-#: 2.3e7.  The limit thus refuses starts within ~1e-5 rad of a singular position, where the
-#: velocities lose more than 6 of their 16 digits; the shipped scenes measure 4.4–15.
+#: condition grows like c/δ with δ the distance to it (c ≈ 9 on the N-four-bar), so the limit
+#: refuses starts within ~1e-5 rad of a singular position, where the velocities lose more than 6
+#: of their 16 digits; the shipped scenes are far below it (figures: docs/measurements.md,
+#: section "Assembly and rank analysis").
 CONDITION_LIMIT = 1e6
 #: A joint row whose component in the left null space of J (the norm of its row of an orthonormal
-#: basis, between 0 and 1) exceeds this takes part in a dependency.  Measured: rows outside every
-#: dependency ≤ 1.8e-16 (round-off, all-revolute spatial four-bar); dependent rows 1/√30 = 0.18 on
-#: Bricard's mechanism and ≥ 0.20 on the all-revolute spatial four-bar.
+#: basis, between 0 and 1) exceeds this takes part in a dependency: rows outside every dependency
+#: are at round-off (~1e-16), dependent rows at ≥ 1/√30 ≈ 0.18 on the shipped scenes (figures:
+#: docs/measurements.md, section "Assembly and rank analysis").
 DEPENDENCE_TOLERANCE = 1e-9
 
 

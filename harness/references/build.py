@@ -12,14 +12,13 @@ Their largest difference over the whole run — every position-level output and 
 of mass, in rad and m — is stored with the reference and must not exceed :data:`AGREEMENT_LIMIT`.
 Route A's trajectory is the reference.  The formulation itself is checked independently elsewhere:
 the planar and spatial four-bar models agree (tests), the engines in joint coordinates agree
-(Pinocchio to ~4e-11 rad), and a third, informational route stored here runs SUNDIALS IDA on the
-stabilised index-2 DAE (:data:`DAE_CHECK`).  IDA's corrector fails below rtol ≈ 1e-13, which leaves
-it ~6e-10 from route A on the four-bar and ~1e-7 on the fast-spinning slider-cranks, so it is
-reported, not required.  Rejected as routes (measured on the 8 s spatial slider-crank, crank turning
-42 rad): adaptive DOP853 on the partitioned form at rtol 3e-14 (1.7e-9 off) and fixed-step
-partitioning with its split switched late (RK4 or RKN4 at 5e-5: 8e-8 and 6e-9 off; the reduced
-ODE steepens near a fold of the independent coordinate, see the in-house ``partition`` method,
-whose default now switches at a 1 % conditioning advantage).
+(Pinocchio), and a third, informational route stored here runs SUNDIALS IDA on the
+stabilised index-2 DAE (:data:`DAE_CHECK`).  IDA's corrector fails below rtol ≈ 1e-13, which keeps
+it short of the agreement limit on some scenes, so it is reported, not required.  Adaptive DOP853
+on the partitioned form and fixed-step partitioning were rejected as routes: neither reaches the
+agreement limit on the spatial slider-crank (the reduced ODE steepens near a fold of the
+independent coordinate, see the in-house ``partition`` method).  Figures: docs/measurements.md,
+section "References".
 
 A scene that passes singular positions and declares the branch it stays on (``[reference]
 equal_joint_angles``, e.g. ``double_fourbar``), or that asks for them (``[reference] routes =
@@ -27,8 +26,8 @@ equal_joint_angles``, e.g. ``double_fourbar``), or that asks for them (``[refere
 other routes, :data:`BRANCH_ROUTE_A` (every
 body, index-1 Newton–Euler with the branch's rows) and :data:`BRANCH_ROUTE_B` (the driver
 coordinate alone, reduced along the branch), both DOP853 on the harness's neutral joint equations: the
-RK4/RKN4 routes lose the branch's accuracy at every passage (they disagree by 1.2e-4 m on
-``double_fourbar``), see :mod:`harness.references.routes`.  Either way route A must also satisfy the
+RK4/RKN4 routes lose the branch's accuracy at every passage, see
+:mod:`harness.references.routes`.  Either way route A must also satisfy the
 plain joint equations within the agreement limit.
 
 Shipped references live in ``scenarios/references`` (``MBH_CACHE_DIR`` overrides it); a file is
@@ -62,9 +61,9 @@ ROUTE_B = ("rkn4+direct:proj_tol=1e-14", 5e-5)
 DAE_CHECK = ("ida:rtol=1e-13,atol=1e-13,max_steps=5000000", GRID_STEP)
 #: The routes of a scene that declares the branch it stays on (``[reference]
 #: equal_joint_angles``): (route, DOP853 tolerance), see :mod:`harness.references.routes`.
-#: The full route is route A (the reference): on double_fourbar it is 1.9e-11 m from the
-#: one-degree-of-freedom model over 10 s, the reduced route 4.7e-10 m (its θ̈ carries the
-#: finite-difference noise of γ, ≈ 2e-13 relative, times θ̇² up to 46 rad²/s²).
+#: The full route is route A (the reference): it is the closer of the two to the
+#: one-degree-of-freedom model, since the reduced route's θ̈ carries the finite-difference noise
+#: of γ times θ̇² (figures: docs/measurements.md, section "References").
 BRANCH_ROUTE_A = ("branch-full:dop853", ROUTE_TOLERANCE)
 BRANCH_ROUTE_B = ("branch-reduced:dop853", ROUTE_TOLERANCE)
 _BRANCH_ROUTES = {BRANCH_ROUTE_A[0]: full_route, BRANCH_ROUTE_B[0]: reduced_route}

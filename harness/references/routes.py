@@ -7,9 +7,10 @@ N-four-bar flattened, rank Φ_q drops from 14 to 12 and the parallelogram branch
 branches where the cranks turn differently.  A route in full coordinates that satisfies Φ only to
 a residual ε sees, near the crossing, the hyperbola ψ·b = ε (ψ along the branch, b across it)
 instead of the crossing: it leaves the branch by ~√ε, and its velocity projection there forces
-transverse rates of the order of the speed along the branch.  Measured on ``double_fourbar``:
-the rk4+direct and rkn4+direct routes of :mod:`harness.references.build` at Δt = 5e-5 s disagree by
-1.2e-4 m, and the disagreement grows as the step shrinks (more projections near the crossing).
+transverse rates of the order of the speed along the branch.  On ``double_fourbar`` the
+rk4+direct and rkn4+direct routes of :mod:`harness.references.build` therefore disagree far beyond
+the agreement limit, the more so the smaller the step (more projections near the crossing;
+figures: docs/measurements.md, section "References").
 
 A scene that stays on one branch can say so: ``[reference] equal_joint_angles`` lists pairs of
 revolute or cylindrical joints that turn by equal angles on it (the parallelogram's cranks).
@@ -31,9 +32,9 @@ Both use only the harness's neutral joint equations, never the in-house kernels.
 right-hand sides (and the reduced route's Newton–Raphson) run compiled
 (:mod:`harness.neutral.dynamics_kernels` on :mod:`harness.neutral.equation_kernels`): the same equations as
 :mod:`harness.neutral.equations` and :mod:`harness.neutral.dynamics` in another operation order,
-under scipy's DOP853 (its own per-step cost is ~12 % of a route beside them).  Measured on the
-shipped scenes: 27–135x faster per route than the stored build times (double_fourbar's full route
-171 s → 3.7 s), route A within 7.9e-12 m of the stored references.
+under scipy's DOP853 (its own per-step cost is a small part of a route beside them), and must
+agree with the interpreted equations' references within the agreement limit (figures:
+docs/measurements.md, section "References").
 
 A scene without singular passages may ask for the same two routes with ``[reference] routes =
 "neutral"`` (``Mechanism.neutral_routes``): then there are no branch rows, only the joints (and

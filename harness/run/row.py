@@ -41,7 +41,8 @@ from harness.measure.verdict import Bounds
 
 #: The calibration case: a fixed in-house run whose wall time is the machine-speed figure that
 #: makes times of different runs and machines comparable as ratios (8000 RK4 steps with
-#: projection; measured 1.05 s of stepping, 1.15 s in all, on the 2-core development machine).
+#: projection; about a second on the development machine, see docs/measurements.md, section
+#: "Campaign sizes").
 CALIBRATION = CaseSpec("fourbar", "inhouse", "rk4+direct", 5e-4, 4.0)
 
 

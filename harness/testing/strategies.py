@@ -94,9 +94,9 @@ def _perpendicular(draw, axis: np.ndarray, planar: bool) -> np.ndarray:
     if np.linalg.norm(trial) < 1e-3:
         trial = np.cross(axis, np.eye(3)[int(np.argmin(np.abs(axis)))])
     # Project again: after the first pass's cancellation trial·axis is ~1e-16 / |trial|, which
-    # the normalisation scales up (measured up to 1.1e-14; a normal that far off tilts the neutral
-    # revolute joint's axis by as much, which Pinocchio's tree joint cannot follow).  Twice: at
-    # most 3.3e-16 over 3000 generated mechanisms.
+    # the normalisation scales up (to ~1e-14; a normal that far off tilts the neutral revolute
+    # joint's axis by as much, which Pinocchio's tree joint cannot follow).  Twice: round-off
+    # (figures: docs/measurements.md, section "Generated mechanisms").
     trial = trial - axis * (trial @ axis)
     return trial / np.linalg.norm(trial)
 
