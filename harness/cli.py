@@ -13,6 +13,7 @@ the case's ``notes``, never on stdout (:mod:`harness.common.capture`).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 
 from harness.common import jsonout
@@ -246,6 +247,12 @@ def _status_counts(frame) -> str:
     return ", ".join(f"{status} {count}" for status, count in sorted(dict(counts).items()))
 
 
+def _interrupted_exit(stop: KeyboardInterrupt) -> int:
+    """The shell's exit status of a run stopped by a signal: 128 + its number (130 for Ctrl-C,
+    143 for SIGTERM, 129 for SIGHUP)."""
+    return 128 + int(getattr(stop, "signum", signal.SIGINT))
+
+
 def cmd_run(args) -> int:
     """Run a campaign into the result store (see :mod:`harness.run.campaign`)."""
     from harness.run.spec import CampaignError, load_campaign
@@ -266,10 +273,10 @@ def cmd_run(args) -> int:
         print(f"mbh: interrupted; run {stop.store.run_id} keeps {len(cases)} finished cases "
               f"({_status_counts(cases)}); complete it with: mbh run {args.campaign} --resume "
               f"{stop.store.run_id}", file=sys.stderr)
-        return 130
-    except KeyboardInterrupt:
+        return _interrupted_exit(stop)
+    except KeyboardInterrupt as stop:
         print("mbh: interrupted before the run started; nothing was stored", file=sys.stderr)
-        return 130
+        return _interrupted_exit(stop)
     cases = store.cases()
     print(f"run {store.run_id}: {store.manifest['status']}, {len(cases)} cases "
           f"({_status_counts(cases)})")
@@ -433,7 +440,7 @@ def cmd_nightly(args) -> int:
     except CampaignInterrupted as stop:
         print(f"mbh: interrupted; run {stop.store.run_id} is stored incomplete, nothing was "
               f"compared", file=sys.stderr)
-        return 130
+        return _interrupted_exit(stop)
     print(outcome.summary, end="")
     print(f"summary {outcome.summary_path}")
     return outcome.exit_code

@@ -17,17 +17,21 @@ Stages of :func:`run_campaign`, in order:
 6. the run is marked ``complete``.
 
 Timing hygiene: the local pool never runs more cases at once than this process has cores
-(:func:`harness.run.executor.usable_cores`), and every worker has one BLAS/numba thread.  Ctrl-C marks
-the run ``interrupted`` (every finished case stays stored) and raises :class:`CampaignInterrupted`;
-``resume`` completes it.
+(:func:`harness.run.executor.usable_cores`), and every worker has one BLAS/numba thread.  Ctrl-C, or
+a stop signal (SIGTERM from a scheduler, a CI timeout or ``systemd``; SIGHUP from a closed
+terminal: :data:`STOP_SIGNALS`), kills the running workers, marks the run ``interrupted`` (every
+finished case stays stored) and raises :class:`CampaignInterrupted`; ``resume`` completes it.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
+import signal
 import sys
+import threading
 from dataclasses import dataclass
 
 from harness.model import scenario
@@ -48,12 +52,47 @@ class RunnerError(MbhError, ValueError):
     """A run that cannot start as asked (bad worker count, unknown or mismatched run to resume)."""
 
 
-class CampaignInterrupted(KeyboardInterrupt):
-    """Ctrl-C during a run; ``store`` is the run, marked ``interrupted``."""
+#: Signals that stop a run the way Ctrl-C does.
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGHUP)
 
-    def __init__(self, store: RunStore):
-        super().__init__(f"run {store.run_id} interrupted")
+
+class StopSignal(KeyboardInterrupt):
+    """A stop signal (:data:`STOP_SIGNALS`) received during a run, raised in the main thread as
+    Ctrl-C raises KeyboardInterrupt, so every path that handles Ctrl-C handles it too."""
+
+    def __init__(self, signum: int):
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+class CampaignInterrupted(KeyboardInterrupt):
+    """Ctrl-C or a stop signal during a run; ``store`` is the run, marked ``interrupted``;
+    ``signum`` the signal (SIGINT for Ctrl-C)."""
+
+    def __init__(self, store: RunStore, signum: int = signal.SIGINT):
+        super().__init__(f"run {store.run_id} interrupted by {signal.Signals(signum).name}")
         self.store = store
+        self.signum = signum
+
+
+@contextlib.contextmanager
+def stop_signals_interrupt():
+    """Within the block, :data:`STOP_SIGNALS` raise :class:`StopSignal` in the main thread; the
+    previous handlers are restored after it.  Off the main thread (where Python cannot set
+    handlers) nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum, _frame):
+        raise StopSignal(signum)
+
+    previous = {signum: signal.signal(signum, stop) for signum in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 @dataclass(frozen=True)
@@ -241,11 +280,19 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     Raises
     ------
     CampaignInterrupted
-        On Ctrl-C, with the run marked ``interrupted``.
+        On Ctrl-C or a stop signal, with the run marked ``interrupted``.
+    StopSignal
+        On a stop signal before the run was stored (a KeyboardInterrupt, as Ctrl-C then).
     RunnerError
         A bad worker count, an unreachable scheduler, an unknown run to resume, or a run of
         another campaign file.
     """
+    with stop_signals_interrupt():
+        return _run_campaign(campaign, workers=workers, scheduler=scheduler, resume=resume,
+                             reuse=reuse, root=root, quiet=quiet, work=work)
+
+
+def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, work) -> RunStore:
     def say(text):
         if not quiet:
             print(text, file=sys.stderr)
@@ -274,8 +321,8 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
                 progress=not quiet)
         if campaign.sweep is not None:
             _sweep(campaign, store, work, workers, scheduler, quiet)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         store.finish("interrupted")
-        raise CampaignInterrupted(store) from None
+        raise CampaignInterrupted(store, getattr(stop, "signum", signal.SIGINT)) from None
     store.finish("complete")
     return store
