@@ -34,11 +34,16 @@ report: $(STAMP)
 	ln -s "$$run" reports/latest 2>/dev/null || cp -R "reports/$$run" reports/latest; \
 	echo "$(CURDIR)/reports/$$run/report.html"
 
+# The suites run on every core (pytest-xdist), a test file's tests on one worker (--dist loadfile:
+# module fixtures run once); TEST_WORKERS=1 runs them in one process.
+TEST_WORKERS ?= auto
+XDIST = $(if $(filter 1,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadfile)
+
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest $(XDIST)
 
 test-slow: $(STAMP)
-	$(BIN)/python -m pytest -m slow
+	$(BIN)/python -m pytest -m slow $(XDIST)
 
 # `make lint`: Ruff with the rules of pyproject.toml ([tool.ruff]) over the whole repository.
 lint: $(STAMP)

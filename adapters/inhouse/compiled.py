@@ -44,6 +44,13 @@ from adapters.inhouse.rank import full_pivot_elimination
 RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILED_RANK, \
     REPARTITION = range(7)
 
+#: The members of the model tuple the compiled loop reads, by name: the Baumgarte gains (α, β),
+#: the constraint rows, the constraint kernels' arguments, the force kernels' arguments, the
+#: sparsity arrays of Φ_q and the generated functions.  numba folds these module constants into
+#: the tuple's indexing, so the names cost nothing; a named tuple in their place made the
+#: generated loop's step 2–3 % slower (docs/measurements.md, "Named model tuple").
+GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED = range(6)
+
 #: Stabilisation codes of :func:`run_steps`.
 PLAIN, PROJECTED, PARTITIONED = range(3)
 
@@ -169,9 +176,9 @@ def _kernel_acceleration(q, v, t, model, counters):
     """q̈ of the index-1 form by the kernel (:func:`index1_acceleration`), for a call the
     generated right-hand side declined (a guard failed, or ``NEVER``)."""
     counters[KERNEL_CALLS] += 1
-    gains = model[0]
-    return index1_acceleration(q, v, t, gains[0], gains[1], model[1], model[2], model[3],
-                               model[4])
+    gains = model[GAINS]
+    return index1_acceleration(q, v, t, gains[0], gains[1], model[ROWS], model[CONSTRAINT_ARGS],
+                               model[DYNAMICS_ARGS], model[SPARSITY])
 
 
 @njit(cache=True)
@@ -179,11 +186,11 @@ def _partitioned_acceleration(q_ind, v_ind, t, model, partition, counters):
     """q̈ of the independent coordinates: the full state by :func:`expand`, then its q̈ from the
     generated right-hand side where it serves, else from the kernel."""
     counters[RHS_EVALS] += 1  # before expand, whose Newton failure ends the step
-    q, v = expand(q_ind, v_ind, t, model[1], model[2], partition, counters)
+    q, v = expand(q_ind, v_ind, t, model[ROWS], model[CONSTRAINT_ARGS], partition, counters)
     counters[JACOBIAN_EVALS] += 1
     counters[FACTORIZATIONS] += 1
     a = np.empty(q.shape[0])
-    if model[5][ACCELERATION](q, v, t, a) == 0:
+    if model[GENERATED][ACCELERATION](q, v, t, a) == 0:
         a = _kernel_acceleration(q, v, t, model, counters)
     return a[partition[0]]
 
@@ -193,13 +200,13 @@ def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters
     """One step of :func:`adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
     operation order (so to the same bits), without a temporary array per tableau coefficient.
 
-    Each stage's q̈ is written in place by the generated right-hand side (``model[5]``), called
-    here rather than through a function that takes the model: passing its ~40 arrays cost more
-    than the four-bar's q̈ itself (figures: docs/measurements.md, section "In-house step cost")."""
+    Each stage's q̈ is written in place by the generated right-hand side
+    (``model[GENERATED]``), called here rather than through a function that takes the model:
+    passing its ~40 arrays cost more than the four-bar's q̈ itself (figures: docs/measurements.md, section "In-house step cost")."""
     c, a, abar, b, bbar = tableau
     stages = np.empty((c.shape[0], v.shape[0]))
     q_stage, v_stage = np.empty(q.shape[0]), np.empty(v.shape[0])
-    generated = model[5][ACCELERATION]
+    generated = model[GENERATED][ACCELERATION]
     for i in range(c.shape[0]):
         _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
         t_stage = t + c[i] * h
@@ -239,7 +246,7 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
     conditioned than the split full pivoting picks, FAILED_RANK when Φ_q lost rank.  With placed
     passages on, ρ̂ of the Φ_q it factors goes to ``passage[2][1]`` (the old one to
     ``passage[2][0]``)."""
-    rows, constraint_args, dependent = model[1], model[2], partition[1]
+    rows, constraint_args, dependent = model[ROWS], model[CONSTRAINT_ARGS], partition[1]
     q, _ = expand(q_ind, v_ind, t, rows, constraint_args, partition, counters)
     jac = _rows_jacobian(q, 0.0, rows, constraint_args, counters)
     rank, pivots = full_pivot_elimination(jac.T)
@@ -247,7 +254,8 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
         partition[8][1] = rank
         return FAILED_RANK
     if passage[0][0] > 0.0:
-        passage[2][0], passage[2][1] = passage[2][1], conditioning_indicator(jac, model[4])
+        passage[2][0], passage[2][1] = passage[2][1], conditioning_indicator(
+            jac, model[SPARSITY])
     best = np.sort(pivots)
     if best.shape[0] == dependent.shape[0] and np.all(best == dependent):
         return RUNNING
@@ -282,17 +290,19 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
         q_new, v_new = _nystrom_step(q, v, t, t_new - t, tableau, model, partition,
                                      stabilisation, counters)
         if stabilisation == PROJECTED:
-            q_new, v_new, rho = _project(q_new, v_new, t_new, model[1], proj_tol, proj_max_iter,
-                                         cut, model[2], model[4], model[5], counters)
+            q_new, v_new, rho = _project(q_new, v_new, t_new, model[ROWS], proj_tol, proj_max_iter,
+                                         cut, model[CONSTRAINT_ARGS], model[SPARSITY],
+                                         model[GENERATED], counters)
             passage[2][0], passage[2][1] = passage[2][1], rho
         elif stabilisation == PLAIN and passage[0][0] > 0.0:  # ρ̂ needs Φ_q at the step's end
             scratch = np.empty(1)
-            if model[5][INDICATOR](q_new, v_new, t_new, scratch) == 1:
+            if model[GENERATED][INDICATOR](q_new, v_new, t_new, scratch) == 1:
                 counters[JACOBIAN_EVALS] += 1
                 rho = scratch[0]
             else:
                 rho = conditioning_indicator(
-                    _rows_jacobian(q_new, t_new, model[1], model[2], counters), model[4])
+                    _rows_jacobian(q_new, t_new, model[ROWS], model[CONSTRAINT_ARGS], counters),
+                    model[SPARSITY])
             passage[2][0], passage[2][1] = passage[2][1], rho
     except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
         return q, v, _exception_code(partition)

@@ -153,7 +153,8 @@ class CompiledStepper(FormulationStepper):
         """Full (q, q̇) of the integrated state at its time ``t``."""
         if self._code != compiled.PARTITIONED:
             return self.q, self.v
-        return compiled.expand(self.q, self.v, t, self._model[1], self._model[2],
+        return compiled.expand(self.q, self.v, t, self._model[compiled.ROWS],
+                               self._model[compiled.CONSTRAINT_ARGS],
                                self._partition, self._counters)
 
     # -- stepping ------------------------------------------------------------------------------
@@ -233,7 +234,7 @@ class CompiledStepper(FormulationStepper):
                               f"{failure[1]:.3g}) at t = {failure[2]:g}")
         if status == compiled.FAILED_RANK:
             return "failed", (f"StepFailure: constraint Jacobian lost rank ({int(failure[1])} < "
-                              f"{self._model[1].size}): singular configuration")
+                              f"{self._model[compiled.ROWS].size}): singular configuration")
         return "failed", "LinAlgError: a factorisation failed in the compiled step"
 
     # -- reading -------------------------------------------------------------------------------
