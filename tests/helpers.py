@@ -82,8 +82,13 @@ ACCELERATION_STEP_DEFAULT = 5e-5
 #: Pinocchio 3.8e-8 / 7.8e-5, in-house 2.9e-7 / 7.8e-5, MuJoCo 4.5e-4 / 4.5e-4 (soft equality
 #: constraints, impedance 0.9999), PyBullet 5.9e-3 / 5.7e-3 (velocity-level closures); margin
 #: ≥ 2.2.  (In-house starts from the harness's start like every engine; before
-#: it did, 0.33 relative was measured here.)
-ACCELERATION_TOLERANCE = {"mujoco": 1e-3, "pybullet": 1.5e-2, "pinocchio": 2e-4, "exudyn": 2e-4,
+#: it did, 0.33 relative was measured here.)  Exudyn's bound is wider: on a generated spatial
+#: mechanism of three bars hinged to ground, no gravity and accelerations of 0.03 m/s² (the
+#: slow profile's example once the tests moved, which re-seeds Hypothesis), Exudyn was off by
+#: 3.4e-4 relative at its 2.5e-5 s step (1.1e-4 at 1.25e-5 s, 1.0e-7 at 5e-5 s) while Pinocchio,
+#: MuJoCo and the in-house formulation agreed with the neutral model to 1e-12: the error of its
+#: index-3 Newton iteration, not of the model; bound 1e-3 (margin 2.9).
+ACCELERATION_TOLERANCE = {"mujoco": 1e-3, "pybullet": 1.5e-2, "pinocchio": 2e-4, "exudyn": 1e-3,
                           "inhouse": 2e-4}
 
 
