@@ -38,7 +38,7 @@ from harness.model import scenario
 from harness.common.environment import code_fingerprint
 from harness.run.executor import execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
-from harness.store.runs import CaseCache, RunStore
+from harness.store.runs import CaseCache, RunLocked, RunStore
 from harness.run.sweep import bisections, stability_sweep
 from harness.measure.verdict import Bounds
 from harness.common.errors import MbhError
@@ -148,12 +148,18 @@ def check_scheduler(address: str) -> None:
 
 
 def _open_store(campaign, resume: str | None, root) -> RunStore:
+    """The new run, or the run to resume, locked for this process (one writer per run)."""
     if resume is None:
-        return RunStore.create(campaign, root)
+        store = RunStore.create(campaign, root)
+        store.lock()
+        return store
     try:
         store = RunStore.open(resume, root)
+        store.lock()
     except FileNotFoundError as error:
         raise RunnerError(f"--resume: {error}") from None
+    except RunLocked as error:
+        raise RunnerError(f"--resume {resume}: {error}") from None
     if store.manifest.get("campaign_text") != campaign.text:
         raise RunnerError(f"--resume {resume}: the run was started from a different campaign "
                          f"file than {campaign.path} (or the file changed since); resume it with "

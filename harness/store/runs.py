@@ -13,6 +13,8 @@ Layout of a run folder ``<root>/<run_id>/`` (root: :func:`results_root`)::
     cases.parquet, sweeps.parquet all rows in one file each (migrated, one per case), written
                                   by :meth:`RunStore.finish` for readers using
                                   ``pd.read_parquet`` directly
+    .writer.lock                  the writer's lock (:meth:`RunStore.lock`): one process writes
+                                  a run at a time; its pid and start time
 
 Reading concatenates the parts in write order and keeps the first row of each ``case_id``, so a
 case written twice (a resume racing a crash) counts once; dot-prefixed temp files left by a
@@ -28,6 +30,7 @@ keeps rows and trajectories of identical cases across runs under ``<root>/cache/
 from __future__ import annotations
 
 import datetime as _dt
+import fcntl
 import hashlib
 import json
 import os
@@ -42,6 +45,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from harness.common import jsonout
+from harness.common.errors import MbhError
 
 from harness.model import scenario
 from harness.common.environment import git_state, machine, package_versions
@@ -296,6 +300,34 @@ def _run_folders(root: Path) -> list[Path]:
     return [path for path in root.iterdir() if (path / _MANIFEST).is_file()]
 
 
+#: A run folder's writer lock: a file locked with ``flock``, which the kernel releases when its
+#: process ends (however it ends), so a dead writer's lock is taken over by the next one.
+_WRITER_LOCK = ".writer.lock"
+
+
+class RunLocked(MbhError, RuntimeError):
+    """Another live process is writing the run; the message names its pid and start time."""
+
+
+def _lock_run_folder(path: Path):
+    """Take ``path``'s writer lock without waiting and record who holds it; the returned open
+    file holds the lock until it is closed or the process ends.  Raises :class:`RunLocked`."""
+    handle = open(path / _WRITER_LOCK, "a+", encoding="utf-8")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "a process that has not said who it is"
+        handle.close()
+        raise RunLocked(f"{path}: the run is being written by {holder}; one process writes a "
+                        f"run at a time (stop that one, e.g. with Ctrl-C, then --resume)") from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"process {os.getpid()}, started {_now()}")
+    handle.flush()
+    return handle
+
+
 class RunStore:
     """One run folder (see the module docstring).  Make one with :meth:`create` or :meth:`open`.
 
@@ -316,6 +348,18 @@ class RunStore:
         version = manifest["created_schema_version"]
         self._cases = _PartTable(path / "cases", CASE_COLUMNS, "case_id", version)
         self._sweeps = _PartTable(path / "sweeps", SWEEP_COLUMNS, "sweep_id", version)
+        self._writer_lock = None
+
+    def lock(self) -> None:
+        """Become the run's one writer until :meth:`finish` (or this process's end).
+
+        Raises
+        ------
+        RunLocked
+            When another live process is writing the run (the message names it).
+        """
+        if self._writer_lock is None:
+            self._writer_lock = _lock_run_folder(self.path)
 
     @classmethod
     def create(cls, campaign, root: Path | None = None) -> "RunStore":
@@ -436,6 +480,9 @@ class RunStore:
                 _write_table(self.path / name, table)
         self.manifest.update(status=status, ended=_now())
         self._write_manifest()
+        if self._writer_lock is not None:
+            self._writer_lock.close()
+            self._writer_lock = None
 
     def cases(self) -> pd.DataFrame:
         """All case rows, one per ``case_id``, in the order they were stored."""

@@ -302,12 +302,9 @@ def stored_parts(root: Path) -> list[Path]:
     return sorted(root.glob("*/cases/part-*.parquet"))
 
 
-def interrupt_and_resume(path: Path, results: Path, signum: int) -> dict:
-    """Start ``mbh run`` on the campaign at ``path``, send ``signum`` once a case is stored, and
-    check the run stopped with 128 + signum, marked ``interrupted`` with its finished cases
-    kept; then ``--resume`` it and check it completes with every case stored exactly once.
-    Returns the run's manifest."""
-    ids = {case.case_id for case in load_campaign(path).cases}
+def start_run(path: Path, results: Path) -> subprocess.Popen:
+    """``mbh run`` on the campaign at ``path`` in the background, returned once it has stored a
+    case (or ended)."""
     # A shell that starts a job in the background (`.ci/run &`) ignores SIGINT in it, and the
     # child would inherit that: give it the default disposition, as an interactive run has.
     run = subprocess.Popen([*MBH, "run", str(path), "--workers", "1", "--quiet"],
@@ -318,6 +315,16 @@ def interrupt_and_resume(path: Path, results: Path, signum: int) -> dict:
         if stored_parts(results) or run.poll() is not None:
             break
         time.sleep(0.1)
+    return run
+
+
+def interrupt_and_resume(path: Path, results: Path, signum: int) -> dict:
+    """Start ``mbh run`` on the campaign at ``path``, send ``signum`` once a case is stored, and
+    check the run stopped with 128 + signum, marked ``interrupted`` with its finished cases
+    kept; then ``--resume`` it and check it completes with every case stored exactly once.
+    Returns the run's manifest."""
+    ids = {case.case_id for case in load_campaign(path).cases}
+    run = start_run(path, results)
     run.send_signal(signum)
     _, err = run.communicate(timeout=120)
     assert run.returncode == 128 + signum, err
@@ -335,6 +342,27 @@ def interrupt_and_resume(path: Path, results: Path, signum: int) -> dict:
     assert sorted(store.cases()["case_id"]) == sorted(ids)
     assert len(stored_parts(results)) == len(ids)  # no case was run and stored twice
     return manifest
+
+
+def test_a_second_writer_of_a_running_run_is_refused_and_changes_nothing(tmp_path, results):
+    path = write_campaign(tmp_path, "interruptible", INTERRUPTIBLE)
+    run = start_run(path, results)
+    try:
+        (manifest,) = list_runs(results)
+        second = mbh("run", str(path), "--resume", manifest["run_id"], "--quiet", root=results)
+        assert second.returncode == 2, second.stderr
+        assert f"being written by process {run.pid}, started " in second.stderr
+        assert "Traceback" not in second.stderr
+        assert list_runs(results)[0]["status"] == "running"  # the first writer's, untouched
+    finally:
+        run.send_signal(signal.SIGINT)
+        run.communicate(timeout=120)
+    # The lock went with its process: the run resumes to completion, every case stored once.
+    done = mbh("run", str(path), "--resume", manifest["run_id"], "--quiet", root=results)
+    assert done.returncode == 0, done.stderr
+    ids = {case.case_id for case in load_campaign(path).cases}
+    assert sorted(RunStore.open(manifest["run_id"], results).cases()["case_id"]) == sorted(ids)
+    assert len(stored_parts(results)) == len(ids)
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
