@@ -279,7 +279,6 @@ def is_scenario_name(name: str) -> bool:
     family, at, _ = name.partition("@")
     if not at:
         return name in scenario_names()
-
     return family in family_names()
 
 

@@ -26,9 +26,9 @@ from harness.model.mechanism import Mechanism
 from harness.model.timegrid import GRID_STEP
 from harness.model.trajectory import Trajectory
 
-__all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "cache_dir", "reference_grid", "reference_paths",
-           "refusal_path", "replace_atomically", "read_reference", "write_reference",
-           "stale_reason", "stored_reference"]
+__all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "ARRAYS", "cache_dir", "reference_grid",
+           "reference_paths", "refusal_path", "replace_atomically", "read_unchecked",
+           "read_reference", "write_reference", "stale_reason", "stored_reference"]
 
 #: Version of the reference builder; bumping it (a formulation change) retires every stored file.
 REFERENCE_VERSION = 3

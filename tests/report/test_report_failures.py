@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from adapters import get_adapter
 from harness.model import scenario
 from harness.run.spec import CaseSpec
 from harness.run.row import error_row
@@ -190,6 +191,15 @@ def test_conditioning_minima_are_the_flattened_passages():
 ])
 def test_integration_kind(adapter, method, kind):
     assert failures.integration_kind(adapter, method) == kind
+
+
+@pytest.mark.parametrize("alias", sorted(failures._INHOUSE_ALIAS_KIND))
+def test_the_report_knows_what_each_inhouse_alias_resolves_to(alias):
+    # A report never asks an adapter, so its table of the in-house aliases is checked here
+    # against the adapter's own resolution.
+    resolved = get_adapter("inhouse").method_spec(alias)[0].name
+    assert failures.integration_kind("inhouse", resolved) == \
+        failures.integration_kind("inhouse", alias) is not None
 
 
 def test_hard_campaign_covers_every_hard_scene():
