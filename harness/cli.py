@@ -52,7 +52,7 @@ def _print_json(value) -> None:
 
 
 def _print_table(rows: list[dict], columns: list[str]) -> None:
-    widths = {c: max(len(c), *(len(str(r.get(c, ""))) for r in rows)) for c in columns}
+    widths = {c: max([len(c), *(len(str(r.get(c, ""))) for r in rows)]) for c in columns}
     print("  ".join(c.ljust(widths[c]) for c in columns))
     for row in rows:
         print("  ".join(str(row.get(c, "")).ljust(widths[c]) for c in columns))
@@ -69,6 +69,8 @@ def cmd_scenarios(args) -> int:
         _print_json(rows)
     else:
         _print_table(rows, ["name", "kind", "bodies", "joints", "tags"])
+        if not rows:
+            print(f"mbh: no scenario files in {scenario.SCENARIO_DIR}", file=sys.stderr)
     return 0
 
 

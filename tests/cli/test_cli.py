@@ -87,3 +87,14 @@ def test_methods_lists_default_and_best_for_every_adapter(capsys):
     for adapter in ("inhouse", "mujoco", "pybullet", "pinocchio", "exudyn"):
         _, rows = run_json(capsys, "methods", "--adapter", adapter)
         assert {"default", "best"} <= {r["method"] for r in rows}
+
+
+def test_scenarios_with_no_scenario_files_says_where_it_looked(capsys, monkeypatch, tmp_path):
+    # As in an installed package that ships no scenario files: a header, no traceback.
+    from harness.model import scenario
+
+    monkeypatch.setattr(scenario, "SCENARIO_DIR", tmp_path)
+    assert cli.main(["scenarios"]) == 0
+    out, err = capsys.readouterr()
+    assert out.split() == ["name", "kind", "bodies", "joints", "tags"]
+    assert f"no scenario files in {tmp_path}" in err
