@@ -7,11 +7,11 @@ STAMP := $(VENV)/.installed
 .PHONY: report test test-slow lint docs check clean-venv
 DOCS_STAMP := $(VENV)/.installed-docs
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "error: $(PYTHON) not found (set PYTHON=...)"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip==25.3"
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[test]"
 	touch $(STAMP)
 
 # `make report`: run the nightly campaign (`make report QUICK=1`: the smoke campaign), store the
@@ -51,8 +51,8 @@ lint: $(STAMP)
 
 # `make docs`: install the docs extra into .venv, then build docs/ strictly (a broken link or a
 # missing page fails) into site/.
-$(DOCS_STAMP): $(STAMP) pyproject.toml
-	$(BIN)/python -m pip install --quiet -e ".[test,docs]"
+$(DOCS_STAMP): $(STAMP) pyproject.toml constraints.txt
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e ".[test,docs]"
 	touch $(DOCS_STAMP)
 
 docs: $(DOCS_STAMP)

@@ -12,10 +12,13 @@ import re
 import subprocess
 from pathlib import Path
 
+from harness.common.locations import checkout
+
 #: Packages whose versions every manifest records.
 RECORDED_PACKAGES = ("numpy", "scipy", "pandas", "pyarrow", "mujoco", "pin", "exudyn",
                      "pybullet", "scikit-sundae", "numba")
 
+#: The folder holding the harness's packages (a checkout, or site-packages when installed).
 _REPO = Path(__file__).resolve().parents[2]
 #: The project's packages whose code computes a case's row (the engines' calls, the measuring
 #: stick, the metrics).
@@ -23,8 +26,13 @@ COMPUTING_PACKAGES = ("harness", "adapters")
 
 
 def _git(*args: str) -> str | None:
+    """Output of ``git args`` in the harness's checkout; None for an installed harness (whose
+    folder may sit inside another project's repository) or when git fails."""
+    repository = checkout()
+    if repository is None:
+        return None
     try:
-        done = subprocess.run(["git", "-C", str(_REPO), *args], capture_output=True, text=True,
+        done = subprocess.run(["git", "-C", str(repository), *args], capture_output=True, text=True,
                               timeout=30, check=False)
     except (OSError, subprocess.SubprocessError):
         return None

@@ -30,17 +30,24 @@ RK4/RKN4 routes lose the branch's accuracy at every passage, see
 :mod:`harness.references.routes`.  Either way route A must also satisfy the
 plain joint equations within the agreement limit.
 
-Shipped references live in ``scenarios/references`` (``MBH_CACHE_DIR`` overrides it); a file is
+Shipped scenes come with their references (``scenarios/references``); a reference built here goes
+to the user cache (:mod:`harness.store.reference_files`: ``MBH_CACHE_DIR`` overrides both); a file is
 keyed by the scenario's content hash and :data:`REFERENCE_VERSION`, so editing a scenario, or
 bumping the version when the formulation changes, rebuilds it.  On load the stored metadata must
 match the scenario and the builder (name, content hash, version, grid step, routes, agreement
 within the limit, arrays on the grid), or the reference is rebuilt; files are written atomically
 (unique temporary file, ``os.replace``), so processes of a pool can share the cache.
+
+A build takes seconds to minutes (docs/measurements.md, "References").  On a terminal it shows a
+progress bar with the time left (:class:`~harness.common.progress.StageProgress`), estimated from
+a pilot run of each stage over the first :data:`PILOT_FRACTION` of the duration; elsewhere it is
+quiet and runs no pilot.
 """
 
 from __future__ import annotations
 
 import json
+import time
 
 import numpy as np
 
@@ -50,11 +57,14 @@ from harness.model.outputs import output_series
 from harness.model.timegrid import GRID_STEP
 from harness.model.trajectory import Trajectory
 from harness.common.errors import MbhError
+from harness.common.progress import StageProgress, progress_wanted
 from harness.store.reference_files import (AGREEMENT_LIMIT, REFERENCE_VERSION, cache_dir,
                                            read_reference, reference_grid, refusal_path,
                                            replace_atomically, write_reference)
 from harness.measure.metrics import constraint_violations
 
+#: Share of the duration a pilot run covers to estimate a stage's cost (progress bar only).
+PILOT_FRACTION = 0.02
 #: (method, step) of each route; IDA's step is only its first-step hint.
 ROUTE_A = ("rk4+direct:proj_tol=1e-14", 5e-5)
 ROUTE_B = ("rkn4+direct:proj_tol=1e-14", 5e-5)
@@ -100,7 +110,9 @@ def routes(mech: Mechanism) -> tuple[tuple[str, float], tuple[str, float]]:
     return (BRANCH_ROUTE_A, BRANCH_ROUTE_B) if mech.neutral_routes else (ROUTE_A, ROUTE_B)
 
 
-def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray) -> Trajectory:
+def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray,
+               t_end: float | None = None) -> Trajectory:
+    """``route`` sampled on ``grid`` up to ``t_end`` (s; the scene's duration unless given)."""
     from adapters import get_adapter
 
     method, step = route
@@ -109,12 +121,29 @@ def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray) -> T
             return _BRANCH_ROUTES[method](mech, grid)
         except BranchRouteError as error:
             raise ReferenceBuildError(f"{mech.name}: reference route {method}: {error}") from error
-    trajectory = get_adapter("inhouse").simulate(mech, method, step, mech.duration, grid)
+    t_end = mech.duration if t_end is None else t_end
+    trajectory = get_adapter("inhouse").simulate(mech, method, step, t_end, grid)
     if trajectory.status != "ok" or trajectory.n_samples != grid.size:
         raise ReferenceBuildError(f"{mech.name}: reference route {method} (dt {step:g}) ended "
                              f"{trajectory.status} at t = {trajectory.failure_time}: "
                              f"{trajectory.reason}")
     return trajectory
+
+
+def _estimate(mech: Mechanism, route: tuple[str, float], grid: np.ndarray) -> float:
+    """Estimated wall time of ``route`` over the whole of ``grid``, s: a pilot run over its first
+    :data:`PILOT_FRACTION`, whose stepping time is scaled up and whose fixed cost (assembly,
+    loading compiled code) is added once; 0 when the pilot fails (the full run will say why)."""
+    count = max(2, int(np.ceil(PILOT_FRACTION * (grid.size - 1))) + 1)
+    pilot = grid[:count]
+    began = time.perf_counter()
+    try:
+        trajectory = _run_route(mech, route, pilot, t_end=float(pilot[-1]))
+    except ReferenceBuildError:
+        return 0.0
+    elapsed = time.perf_counter() - began
+    stepping = min(trajectory.wall_time_s or elapsed, elapsed)
+    return elapsed - stepping + stepping * (grid.size - 1) / (count - 1)
 
 
 def _cost(trajectory: Trajectory) -> dict:
@@ -131,27 +160,34 @@ def _dae_check(mech: Mechanism, route_a: Trajectory, grid: np.ndarray) -> dict:
             "cost": _cost(dae)}
 
 
-def build_reference(mech: Mechanism) -> tuple[Trajectory, dict]:
+def build_reference(mech: Mechanism, show_progress: bool | None = None) -> tuple[Trajectory, dict]:
     """Compute both routes, their agreement and the DAE check (no cache); raises ReferenceBuildError
-    when the routes differ by more than :data:`AGREEMENT_LIMIT`."""
+    when the routes differ by more than :data:`AGREEMENT_LIMIT`.  ``show_progress``: draw the
+    progress bar (None: when stderr is a terminal)."""
     grid = reference_grid(mech)
     first, second = routes(mech)
-    route_a = _run_route(mech, first, grid)
-    route_b = _run_route(mech, second, grid)
-    agreement = route_difference(mech, route_a, route_b)
-    if agreement["max"] > AGREEMENT_LIMIT:
-        raise ReferenceBuildError(f"{mech.name}: reference routes disagree by {agreement['max']:.3g} "
-                             f"> {AGREEMENT_LIMIT:g} ({json.dumps(agreement)})")
-
-    joints = constraint_violations(mech, route_a)["max_constraint_violation"]
-    if not joints <= AGREEMENT_LIMIT:
-        raise ReferenceBuildError(f"{mech.name}: route A violates the joint equations by {joints:.3g} "
-                             f"m > {AGREEMENT_LIMIT:g}")
+    stages = [first, second] + ([] if mech.branch else [DAE_CHECK])
+    shown = progress_wanted(True) if show_progress is None else show_progress
+    estimates = [_estimate(mech, route, grid) for route in stages] if shown else [0.0] * len(stages)
+    with StageProgress(f"reference {mech.name}", estimates, shown) as bar:
+        route_a = bar.run(0, f"route A {first[0]}", lambda: _run_route(mech, first, grid))
+        route_b = bar.run(1, f"route B {second[0]}", lambda: _run_route(mech, second, grid))
+        agreement = route_difference(mech, route_a, route_b)
+        if agreement["max"] > AGREEMENT_LIMIT:
+            raise ReferenceBuildError(f"{mech.name}: reference routes disagree by "
+                                      f"{agreement['max']:.3g} > {AGREEMENT_LIMIT:g} "
+                                      f"({json.dumps(agreement)})")
+        joints = constraint_violations(mech, route_a)["max_constraint_violation"]
+        if not joints <= AGREEMENT_LIMIT:
+            raise ReferenceBuildError(f"{mech.name}: route A violates the joint equations by "
+                                      f"{joints:.3g} m > {AGREEMENT_LIMIT:g}")
+        dae = (bar.run(2, "DAE check", lambda: _dae_check(mech, route_a, grid))
+               if not mech.branch else None)
     info = {"scenario": mech.name, "content_hash": mech.content_hash,
             "version": REFERENCE_VERSION, "route_a": list(first), "route_b": list(second),
             "grid_step": GRID_STEP, "agreement": agreement, "max_constraint_violation": joints,
             "route_a_cost": _cost(route_a), "route_b_cost": _cost(route_b),
-            "dae_check": (_dae_check(mech, route_a, grid) if not mech.branch else
+            "dae_check": (dae if not mech.branch else
                           {"method": DAE_CHECK[0], "status": "skipped",
                            "reason": "not run on a scene with singular passages (IDA failed at the "
                                      "first one on double_fourbar, t = 0.71 s)"})}
@@ -168,7 +204,7 @@ def reference_info(mech: Mechanism) -> dict:
     return load_or_build(mech)[1]
 
 
-def load_or_build(mech: Mechanism) -> tuple[Trajectory, dict]:
+def load_or_build(mech: Mechanism, show_progress: bool | None = None) -> tuple[Trajectory, dict]:
     """``mech``'s reference and its metadata, from the cache when the stored files pass
     :func:`_stale_reason`, otherwise built and cached.
 
@@ -190,7 +226,7 @@ def load_or_build(mech: Mechanism) -> tuple[Trajectory, dict]:
         return cached
     _raise_recorded_refusal(mech)
     try:
-        trajectory, info = build_reference(mech)
+        trajectory, info = build_reference(mech, show_progress)
     except ReferenceBuildError as error:
         _record_refusal(mech, error)
         raise
@@ -229,4 +265,4 @@ def _raise_recorded_refusal(mech: Mechanism) -> None:
         return
     if isinstance(record, dict) and all(record.get(k) == v for k, v in _refusal_key(mech).items()):
         raise ReferenceBuildError(f"{record.get('refused')} (recorded by an earlier build in "
-                             f"{refusal_path(mech).name}; delete it to build again)")
+                             f"{refusal_path(mech)}; delete it to build again)")

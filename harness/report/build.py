@@ -24,6 +24,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
+from harness.common.locations import checkout, user_data
 from harness.model import scenario as scenarios
 from harness.store.reference_files import stored_reference
 from harness.report import failures, figures, mechanism, seed_compare, summary
@@ -50,7 +51,6 @@ SNAPSHOT_FRACTIONS = (0.0, 1 / 3, 2 / 3, 1.0)
 #: Frames of the HTML animation of each mechanism.
 ANIMATION_FRAMES = 60
 
-_REPO = Path(__file__).resolve().parent.parent.parent
 _TEMPLATES = Path(__file__).resolve().parent / "templates"
 
 
@@ -104,8 +104,10 @@ class Report:
 
 
 def reports_root() -> Path:
-    """Where ``mbh report`` writes by default: ``<repository>/reports``."""
-    return _REPO / "reports"
+    """Where ``mbh report`` writes by default: ``reports`` in the checkout the harness runs from,
+    else in the user data folder."""
+    repository = checkout()
+    return (repository if repository is not None else user_data()) / "reports"
 
 
 def parse_formats(text: str) -> tuple[str, ...]:

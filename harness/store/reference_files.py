@@ -5,7 +5,11 @@ A reference is kept as two files named ``<scene>-<content hash[:16]>-v<version>`
 states on the reference grid (``.npz``: times, position, quaternion, velocity, angular velocity)
 and its metadata (``.json``: the scene's name and hash, the version, the grid step, the two
 routes, their agreement and cost).  A refused build is recorded beside them
-(``.refused.json``).  The references are built by :mod:`harness.references.build`; reports read
+(``.refused.json``).
+
+Shipped scenes come with their references (``scenarios/references``, inside the installed
+package); a reference built on this machine goes to the user cache (:func:`cache_dir`), never into
+the package.  The references are built by :mod:`harness.references.build`; reports read
 them through :func:`stored_reference` and never build one.
 
 Files are written atomically (a unique temporary file moved into place with ``os.replace``),
@@ -22,11 +26,13 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.common.locations import shipped, user_cache
 from harness.model.mechanism import Mechanism
 from harness.model.timegrid import GRID_STEP
 from harness.model.trajectory import Trajectory
 
-__all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "ARRAYS", "cache_dir", "reference_grid",
+__all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "ARRAYS", "CACHE_ENV", "cache_dir",
+           "search_dirs", "reference_grid",
            "reference_paths", "refusal_path", "replace_atomically", "read_unchecked",
            "read_reference", "write_reference", "stale_reason", "stored_reference"]
 
@@ -38,11 +44,23 @@ AGREEMENT_LIMIT = 1e-9
 ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")
 
 
+#: Environment variable naming the one folder references are read from and written to.
+CACHE_ENV = "MBH_CACHE_DIR"
+
+
 def cache_dir() -> Path:
-    """Directory of the stored references: ``MBH_CACHE_DIR`` or the shipped
-    ``scenarios/references``."""
-    default = Path(__file__).resolve().parents[2] / "scenarios" / "references"
-    return Path(os.environ.get("MBH_CACHE_DIR", default))
+    """Where references built here are written: ``$MBH_CACHE_DIR``, else ``references`` in the
+    user cache (:func:`harness.common.locations.user_cache`)."""
+    configured = os.environ.get(CACHE_ENV)
+    return Path(configured) if configured else user_cache() / "references"
+
+
+def search_dirs() -> tuple[Path, ...]:
+    """Folders a reference is read from, the first holding it wins: ``$MBH_CACHE_DIR`` alone when
+    set, else the user cache's and then the shipped ``scenarios/references``."""
+    if os.environ.get(CACHE_ENV):
+        return (cache_dir(),)
+    return cache_dir(), shipped("scenarios") / "references"
 
 
 def reference_grid(mech: Mechanism) -> np.ndarray:
@@ -50,20 +68,32 @@ def reference_grid(mech: Mechanism) -> np.ndarray:
     return np.arange(int(round(mech.duration / GRID_STEP)) + 1) * GRID_STEP
 
 
-def reference_paths(mech: Mechanism) -> tuple[Path, Path]:
-    """The data (.npz) and metadata (.json) files of ``mech``'s reference."""
+def _paths_in(folder: Path, mech: Mechanism) -> tuple[Path, Path]:
     stem = f"{mech.name}-{mech.content_hash[:16]}-v{REFERENCE_VERSION}"
-    return cache_dir() / f"{stem}.npz", cache_dir() / f"{stem}.json"
+    return folder / f"{stem}.npz", folder / f"{stem}.json"
+
+
+def reference_paths(mech: Mechanism) -> tuple[Path, Path]:
+    """The data (.npz) and metadata (.json) files of ``mech``'s reference: in the first of
+    :func:`search_dirs` that holds its metadata, else where a build writes them
+    (:func:`cache_dir`)."""
+    for folder in search_dirs():
+        paths = _paths_in(folder, mech)
+        if paths[1].is_file():
+            return paths
+    return _paths_in(cache_dir(), mech)
 
 
 def refusal_path(mech: Mechanism) -> Path:
-    """Where a refused build of ``mech`` is recorded."""
-    return reference_paths(mech)[1].with_suffix(".refused.json")
+    """Where a refused build of ``mech`` is recorded (in :func:`cache_dir`)."""
+    return _paths_in(cache_dir(), mech)[1].with_suffix(".refused.json")
 
 
 def replace_atomically(path: Path, write) -> None:
     """Call ``write(binary file)`` on a unique temporary file next to ``path``, then move it onto
-    ``path`` with ``os.replace``; the temporary file is removed if anything fails."""
+    ``path`` with ``os.replace`` (creating ``path``'s folder if needed); the temporary file is
+    removed if anything fails."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     handle = tempfile.NamedTemporaryFile(dir=path.parent, prefix=f".{path.name}.",
                                          suffix=".tmp", delete=False)
     try:
@@ -77,9 +107,9 @@ def replace_atomically(path: Path, write) -> None:
 
 
 def write_reference(mech: Mechanism, trajectory: Trajectory, info: dict) -> None:
-    """Store ``mech``'s reference and its metadata (data first, metadata last); raises OSError."""
-    data_path, info_path = reference_paths(mech)
-    data_path.parent.mkdir(parents=True, exist_ok=True)
+    """Store ``mech``'s reference and its metadata (data first, metadata last) in
+    :func:`cache_dir`; raises OSError."""
+    data_path, info_path = _paths_in(cache_dir(), mech)
     replace_atomically(data_path, lambda handle: np.savez_compressed(
         handle, **{key: getattr(trajectory, key) for key in ARRAYS}))
     replace_atomically(info_path, lambda handle: handle.write(json.dumps(info, indent=2).encode()))

@@ -44,6 +44,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from harness.common.locations import checkout, user_data
 from harness.common import jsonout
 from harness.common.errors import MbhError
 
@@ -54,6 +55,7 @@ from harness.store.schema import (CASE_COLUMNS, SCHEMA_VERSION, SWEEP_COLUMNS, V
 from harness.model.trajectory import Trajectory
 
 __all__ = ["SCHEMA_VERSION", "results_root", "RunStore", "list_runs", "latest_run", "load_run",
+           "case_frame",
            "CaseCache", "RUN_STATUSES"]
 
 #: Environment variable naming the results root.
@@ -65,7 +67,6 @@ RUN_STATUSES = ("running", "complete", "interrupted")
 #: Statuses the cache never keeps: they describe the machine's load, not the case.
 UNCACHED_STATUSES = ("timeout", "crashed")
 
-_REPO = Path(__file__).resolve().parents[2]
 _MANIFEST = "manifest.json"
 _PART = re.compile(r"^part-(\d+)\.parquet$")
 _TRAJECTORY_ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")
@@ -74,9 +75,14 @@ _PANDAS_TYPES = {pa.int64(): pd.Int64Dtype(), pa.bool_(): pd.BooleanDtype()}.get
 
 
 def results_root() -> Path:
-    """The results root: ``$MBH_RESULTS_DIR`` if set, else ``<repository>/results``."""
+    """The results root: ``$MBH_RESULTS_DIR`` if set, else ``results`` in the checkout the harness
+    runs from, else ``results`` in the user data folder (an installed harness never writes into
+    its own package)."""
     configured = os.environ.get(ROOT_ENV)
-    return Path(configured) if configured else _REPO / "results"
+    if configured:
+        return Path(configured)
+    repository = checkout()
+    return (repository if repository is not None else user_data()) / "results"
 
 
 def _now() -> str:
@@ -152,6 +158,17 @@ def _to_frame(table: pa.Table | None, columns: dict[str, pa.DataType]) -> pd.Dat
     if table is None:
         table = pa.schema(list(columns.items())).empty_table()
     return table.to_pandas(types_mapper=_PANDAS_TYPES)
+
+
+def case_frame(row: dict) -> pd.DataFrame:
+    """One case row as a one-row DataFrame with the column types :func:`load_run` gives.
+
+    Raises
+    ------
+    TypeError
+        Naming the column whose value does not fit its declared type.
+    """
+    return _to_frame(_row_table(row, CASE_COLUMNS), CASE_COLUMNS)
 
 
 class _PartTable:

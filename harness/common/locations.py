@@ -1,0 +1,62 @@
+"""Where the harness finds what it ships and where it writes what it makes.
+
+Shipped files (read only):
+
+* ``scenarios`` (the scenario files and, in ``scenarios/references``, their verified references)
+  and ``campaigns`` (the campaign files).  In a checkout they are the repository's folders of those
+  names; an installed wheel carries them inside the ``harness`` package (``harness/scenarios``,
+  ``harness/campaigns``: ``pyproject.toml`` maps the folders there), read through
+  :mod:`importlib.resources`.
+
+Written files, never inside the installed package:
+
+* the user cache (:func:`user_cache`): references of scenes that are not shipped, generated
+  functions and compiled kernels; ``$MBH_CACHE_HOME``, else the platform's cache folder for
+  ``mbh`` (``$XDG_CACHE_HOME/mbh`` or ``~/.cache/mbh`` on Linux, via :mod:`platformdirs`);
+* the results root (:func:`harness.store.runs.results_root`): ``$MBH_RESULTS_DIR``, else
+  ``results/`` in a checkout, else the platform's data folder for ``mbh`` (``~/.local/share/mbh``
+  on Linux).
+"""
+
+from __future__ import annotations
+
+import importlib.resources
+import os
+from pathlib import Path
+
+import platformdirs
+
+#: Environment variable moving the whole user cache.
+CACHE_ENV = "MBH_CACHE_HOME"
+#: The folders shipped with the harness.
+SHIPPED = ("scenarios", "campaigns")
+
+_CHECKOUT = Path(__file__).resolve().parents[2]
+
+
+def checkout() -> Path | None:
+    """The repository the harness runs from (a checkout or an editable install), or None for an
+    installed wheel: the folder holding ``pyproject.toml`` beside the ``harness`` package."""
+    return _CHECKOUT if (_CHECKOUT / "pyproject.toml").is_file() else None
+
+
+def shipped(folder: str) -> Path:
+    """The shipped folder ``folder`` (one of :data:`SHIPPED`): inside the installed package, else
+    the checkout's folder of that name."""
+    if folder not in SHIPPED:
+        raise ValueError(f"{folder!r} is not a shipped folder ({', '.join(SHIPPED)})")
+    packaged = Path(str(importlib.resources.files("harness") / folder))
+    if packaged.is_dir():
+        return packaged
+    return _CHECKOUT / folder
+
+
+def user_cache() -> Path:
+    """The user cache folder: ``$MBH_CACHE_HOME``, else the platform's user cache folder."""
+    configured = os.environ.get(CACHE_ENV)
+    return Path(configured) if configured else platformdirs.user_cache_path("mbh")
+
+
+def user_data() -> Path:
+    """The platform's user data folder for ``mbh`` (results of an installed harness)."""
+    return platformdirs.user_data_path("mbh")
