@@ -189,6 +189,31 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+def cmd_reference(args) -> int:
+    """Build (or find) a scene's verified reference ahead of its first case and say where it is,
+    how well its two routes agree and what it cost; exit 1 when the build is refused."""
+    from harness.references.build import ReferenceBuildError, load_or_build
+    from harness.store.reference_files import reference_paths
+
+    mech = _load(args.name)
+    try:
+        _, info = load_or_build(mech, show_progress=None if not args.quiet else False)
+    except ReferenceBuildError as error:
+        print(f"mbh: reference refused: {error}", file=sys.stderr)
+        return 1
+    data_path, info_path = reference_paths(mech)
+    result = {"scenario": mech.name, "content_hash": mech.content_hash,
+              "data": str(data_path), "metadata": str(info_path),
+              "agreement": info["agreement"]["max"],
+              "wall_time_s": sum(info[key]["wall_time_s"] for key in ("route_a_cost", "route_b_cost"))}
+    if args.json:
+        _print_json(result)
+    else:
+        for key, value in result.items():
+            print(f"{key:14s} {value}")
+    return 0
+
+
 def cmd_export(args) -> int:
     mech = _load(args.name)
     adapter = _adapter(args.adapter)
@@ -484,13 +509,21 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_seed_table)
 
+    p = sub.add_parser("reference", help="build a scene's verified reference ahead of its first "
+                       "case (into the user cache; a progress bar on a terminal)")
+    p.add_argument("name", help="scenario name or file")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.set_defaults(func=cmd_reference)
+
     p = sub.add_parser("export", help="write the engine model an adapter generates (MJCF)")
     p.add_argument("name")
     p.add_argument("--adapter", default="mujoco")
     p.add_argument("--output", "-o", default=None)
     p.set_defaults(func=cmd_export)
 
-    root_help = "results root (default: $MBH_RESULTS_DIR or <repository>/results)"
+    root_help = ("results root (default: $MBH_RESULTS_DIR, else results/ in a checkout, else the "
+                 "user data folder)")
     p = sub.add_parser("run", help="run a campaign into the result store")
     p.add_argument("campaign", help="campaign name (campaigns/NAME.toml) or file")
     p.add_argument("--workers", type=_positive_int, default=None,

@@ -1,17 +1,72 @@
-"""mbh: load stored campaign results into pandas.
+"""mbh: the harness's public Python API.
 
-The harness itself lives in the ``harness`` and ``adapters`` packages; this package only names
-the store's reading functions for users.
+Load a scene or build one, run one case or a whole campaign, read the stored runs.  Everything a
+user needs is named here; the ``harness`` and ``adapters`` packages behind it are internal.
+docs/api.md documents each name with runnable examples (the tests run them).
 
 Examples
 --------
 >>> import mbh
->>> runs = mbh.list_runs()                 # manifests, oldest first
->>> cases = mbh.load_run(runs[-1]["run_id"])  # one row per case (harness.store.runs column names)
+>>> fourbar = mbh.load_scenario("fourbar")
+>>> result = mbh.run_case(fourbar, "mujoco", "best", dt=1e-3, t_end=0.1)
+>>> result.status
+'ok'
+>>> frame = result.to_frame()              # one row, the columns of a stored run
+>>> frame.loc[0, "adapter"]
+'mujoco'
 """
 
 from harness.common.errors import MbhError
+from harness.measure.verdict import Bounds
+from harness.model.builder import MechanismBuilder
+from harness.model.mechanism import Mechanism
+from harness.model.scenario import ScenarioError, scenario_names
+from harness.model.scenario import load as load_scenario
+from harness.run.case import CaseResult
+from harness.run.single import CaseInputError
+from harness.run.single import run_one as run_case
+from harness.run.spec import CampaignError, campaign_names, load_campaign
 from harness.store.compare import compare_runs
 from harness.store.runs import RunStore, list_runs, load_run, results_root
 
-__all__ = ["MbhError", "RunStore", "compare_runs", "list_runs", "load_run", "results_root"]
+
+def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool = False,
+                 resume: str | None = None, quiet: bool = True) -> RunStore:
+    """Run a campaign into the result store, as ``mbh run`` does.
+
+    Parameters
+    ----------
+    campaign : str or Path
+        A shipped campaign name or a campaign file (its scenarios by shipped name or by path
+        relative to the file).
+    workers : int, optional
+        Worker processes (default: the cores).
+    root : path, optional
+        Results root (default :func:`results_root`).
+    reuse : bool
+        Copy identical cases from the cache instead of running them.
+    resume : str, optional
+        Run id of an interrupted run of the same campaign file to complete.
+    quiet : bool
+        No progress bar and no notes on stderr (default for the API).
+
+    Returns
+    -------
+    RunStore
+        The finished run: ``.run_id``, ``.cases()`` (a DataFrame), ``.manifest``.
+
+    Raises
+    ------
+    CampaignError
+        The file does not validate (every problem, naming the file and field).
+    """
+    from harness.run.campaign import run_campaign as run
+
+    return run(load_campaign(campaign), workers=workers, root=root, reuse=reuse,
+               resume=resume, quiet=quiet)
+
+
+__all__ = ["Bounds", "CampaignError", "CaseInputError", "CaseResult", "Mechanism",
+           "MechanismBuilder", "MbhError", "RunStore", "ScenarioError", "campaign_names",
+           "compare_runs", "list_runs", "load_campaign", "load_run", "load_scenario",
+           "results_root", "run_campaign", "run_case", "scenario_names"]

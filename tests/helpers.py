@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 import sys
 from pathlib import Path
 
@@ -136,3 +137,22 @@ def seed_rows() -> list[dict]:
                              "max_energy_error_J": "NaN" if integrator == "rk4" else 10.0,
                              "wall_time_s": 0.5, "newton_per_step": 3.0})
     return rows
+
+
+#: The documentation page holding the plugin's example suite, and its section.
+EXAMPLE_PAGE = ROOT / "docs" / "formats" / "tolerances.md"
+EXAMPLE_SECTION = "## An example suite"
+
+
+def example_suite_files() -> dict[str, str]:
+    """The example files of the documentation's example suite: every fenced block whose first
+    line is ``# <file name>`` (a .py or .toml file), by file name."""
+    text = EXAMPLE_PAGE.read_text(encoding="utf-8")
+    section = text[text.index(EXAMPLE_SECTION):]
+    section = section[:section.index("\n## ", len(EXAMPLE_SECTION))]
+    files = {}
+    for block in re.findall(r"```[a-z]*\n(.*?)```", section, flags=re.DOTALL):
+        found = re.match(r"# (\S+\.(?:py|toml))\b", block)
+        if found:
+            files[found.group(1)] = block
+    return files

@@ -43,8 +43,10 @@ from harness.model.mechanism import (
 from harness.model.families import FamilyError, family_document, family_names
 from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
 from harness.common.errors import MbhError
+from harness.common.locations import shipped
 
-SCENARIO_DIR = Path(__file__).resolve().parents[2] / "scenarios"
+#: The shipped scenario files (harness.common.locations: the checkout's or the installed package's).
+SCENARIO_DIR = shipped("scenarios")
 
 _TOP_KEYS = {"name", "kind", "plane", "duration", "sample_step", "gravity", "tags", "notes", "bodies", "joints",
              "forces", "initial", "outputs", "reference"}
@@ -303,7 +305,25 @@ def load(name_or_path: str | Path) -> Mechanism:
         raise ScenarioError([Problem(file, "-", f"no such scenario file (shipped: {known})")]) from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise ScenarioError([Problem(file, "-", f"not valid TOML: {error}")]) from None
-    return _Builder(file, path.stem, document).build()
+    return from_document(document, path.stem, file)
+
+
+def from_document(document: dict, name: str, source: str) -> Mechanism:
+    """Validate a scenario document (the dict a scenario file parses to) named ``name`` (the
+    file's stem: its ``name`` key, if any, wins) and build its :class:`Mechanism`; ``source``
+    names it in every problem, as a file path does.  Used by the file loader and the Python
+    builder (:mod:`harness.model.builder`), so both check the same rules and hash the same
+    document the same way.
+
+    Raises
+    ------
+    ScenarioError
+        With every problem found, each naming ``source`` and the field.
+    """
+    if not isinstance(document, dict):
+        raise ScenarioError([Problem(source, "-", f"expected a table of fields, got "
+                                                  f"{type(document).__name__}")])
+    return _Builder(source, name, document).build()
 
 
 def _load_family_member(name: str) -> Mechanism:

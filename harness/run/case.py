@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import pandas as pd
+
 from adapters.base import Adapter, UnsupportedCase
 from harness.common.capture import captured_output, engine_note
 from harness.neutral.conditioning import label_failure
@@ -13,6 +15,7 @@ from harness.model.mechanism import Mechanism
 from harness.model.timegrid import sample_times
 from harness.model.trajectory import Trajectory
 from harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
+from harness.store.runs import case_frame
 
 
 @dataclass(frozen=True)
@@ -34,6 +37,25 @@ class CaseResult:
     trajectory: Trajectory
     metrics: dict
     row: dict | None = None
+
+    @property
+    def status(self) -> str:
+        """The verdict: ``ok``, ``failed``, ``diverged``, ``unsupported`` (docs/adapters.md)."""
+        return self.trajectory.status
+
+    @property
+    def reason(self) -> str:
+        """Why the case is not ``ok`` ('' when it is)."""
+        return self.trajectory.reason
+
+    def to_frame(self) -> pd.DataFrame:
+        """The case's row as a one-row DataFrame, with the columns and types of a stored run's
+        (:func:`harness.store.runs.load_run`) less those the store adds (``run_id``,
+        ``trajectory_file``, ``reused_from``); raises ValueError for a result without a row."""
+        if self.row is None:
+            raise ValueError("this result has no row: run it with harness.run.row.run_one or "
+                             "in a campaign")
+        return case_frame(self.row)
 
 
 def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,

@@ -110,12 +110,16 @@ def _metric_columns(metrics: dict, mech: Mechanism) -> dict:
     return row
 
 
-def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseResult:
+def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
+             mech: Mechanism | None = None) -> CaseResult:
     """Run one case and flatten it into a row.
 
     Parameters
     ----------
     spec : CaseSpec
+    mech : Mechanism, optional
+        The scene, when it was built in Python (:mod:`harness.model.builder`); loaded from
+        ``spec.scenario`` otherwise.
     bounds : Bounds
         The verdict's bounds.
     accuracy : float
@@ -129,7 +133,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float) -> CaseResult:
         measuring it) gives status ``failed`` with the exception as the reason (and empty
         ``metrics``).
     """
-    mech = scenario.load(spec.scenario)
+    mech = scenario.load(spec.scenario) if mech is None else mech
     adapter = get_adapter(spec.adapter)
     reference, reference_column = _load_reference(mech)
     try:

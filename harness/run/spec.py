@@ -27,8 +27,9 @@ from harness.model.timegrid import steps_per_sample
 from harness.model.scenario import Problem, _Collector, _join
 from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
 from harness.common.errors import MbhError
+from harness.common.locations import shipped
 
-CAMPAIGN_DIR = Path(__file__).resolve().parents[2] / "campaigns"
+CAMPAIGN_DIR = shipped("campaigns")
 
 #: Settings when a file does not give them.
 DEFAULT_REPETITIONS = 1
@@ -51,7 +52,8 @@ class CaseSpec:
     Attributes
     ----------
     scenario : str
-        Scenario name (``scenarios/<name>.toml``).
+        Shipped scenario name, family member (``family@parameter``) or the absolute path of a
+        scenario file (a campaign names it relative to itself; :meth:`_Reader._scenario_name`).
     adapter : str
         Registry name.
     method : str
@@ -188,15 +190,16 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
             from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise CampaignError([Problem(file, "-", f"not valid TOML: {error}")]) from None
-    return _Reader(file, document).read(path, text)
+    return _Reader(file, document, path.resolve().parent).read(path, text)
 
 
 class _Reader:
     """Turns a parsed campaign document into a :class:`Campaign`, collecting problems."""
 
-    def __init__(self, file: str, document: dict):
+    def __init__(self, file: str, document: dict, folder: Path):
         self.c = _Collector(file)
         self.document = document
+        self.folder = folder
         self._mechanisms: dict[str, Mechanism | None] = {}
         self._adapters: dict[str, Adapter | None] = {}
         self._methods_checked: set[tuple[str, str]] = set()
@@ -251,12 +254,13 @@ class _Reader:
             self.c.add(path, f"expected a table of scenario = seconds, got {table!r}")
             return {}
         durations = {}
-        for key in table:
-            value = self.c.number(table, key, path, positive=True)
+        for written in table:
+            value = self.c.number(table, written, path, positive=True)
+            key = self._scenario_name(written)
             if key != EVERY_SCENARIO:
-                mech = self._mechanism(key, _join(path, key))
+                mech = self._mechanism(key, _join(path, written))
                 if mech is not None and value is not None and value > mech.duration:
-                    self.c.add(_join(path, key), f"{value!r} s is beyond the scenario's duration "
+                    self.c.add(_join(path, written), f"{value!r} s is beyond the scenario's duration "
                                f"{mech.duration!r} s (its reference ends there)")
                     value = None
             if value is not None:
@@ -265,12 +269,20 @@ class _Reader:
 
     # --- names --------------------------------------------------------------------------------
 
+    def _scenario_name(self, written: Any) -> Any:
+        """A scenario as the cases name it: a file (``*.toml``) relative to the campaign file
+        becomes its absolute path, so a user's campaign and scenes live side by side in the
+        user's repository; names (shipped scenes, family members) stay as written."""
+        if isinstance(written, str) and written.endswith(".toml"):
+            return str((self.folder / written).resolve())
+        return written
+
     def _mechanism(self, name: Any, field: str) -> Mechanism | None:
         if not isinstance(name, str):
             self.c.add(field, f"expected a scenario name, got {name!r}")
             return None
         if name not in self._mechanisms:
-            if not scenario.is_scenario_name(name):
+            if not name.endswith(".toml") and not scenario.is_scenario_name(name):
                 known = ", ".join(scenario.scenario_names())
                 self.c.add(field, f"unknown scenario {name!r} (known: {known})")
                 self._mechanisms[name] = None
@@ -312,7 +324,7 @@ class _Reader:
         names = self._without_excepted(
             table, path, self._names(table, "scenarios", path, scenario.scenario_names()))
         found = [(n, self._mechanism(n, f"{_join(path, 'scenarios')}[{i}]"))
-                 for i, n in enumerate(names)]
+                 for i, n in enumerate(map(self._scenario_name, names))]
         return [(n, mech) for n, mech in found if mech is not None]
 
     def _without_excepted(self, table: dict, path: str, names: list[str]) -> list[str]:

@@ -21,30 +21,12 @@ from harness.testing.cases import CaseRunner, SessionCase, ToleranceError, case_
 from harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
                                 constraint_violation_series)
 from harness.model.trajectory import Trajectory
-from tests.helpers import ROOT
-
-EXAMPLE_PAGE = ROOT / "docs" / "formats" / "tolerances.md"
-SECTION = "## An example suite"
-
+from tests.helpers import example_suite_files
 
 def run_pytest(folder: Path, *args: str) -> subprocess.CompletedProcess:
     """``python -m pytest -q`` in ``folder`` (its own rootdir), output as text."""
     return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *args],
                           cwd=folder, capture_output=True, text=True, timeout=600, check=False)
-
-
-def readme_files() -> dict[str, str]:
-    """The example files of the documentation's example suite: every fenced block whose first line is
-    ``# <file name>`` (a .py or .toml file), by file name."""
-    text = EXAMPLE_PAGE.read_text(encoding="utf-8")
-    section = text[text.index(SECTION):]
-    section = section[:section.index("\n## ", len(SECTION))]
-    files = {}
-    for block in re.findall(r"```[a-z]*\n(.*?)```", section, flags=re.DOTALL):
-        found = re.match(r"# (\S+\.(?:py|toml))\b", block)
-        if found:
-            files[found.group(1)] = block
-    return files
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +35,7 @@ def runner() -> CaseRunner:
 
 
 def test_readme_example_runs_as_pasted(tmp_path):
-    files = readme_files()
+    files = example_suite_files()
     assert sorted(files) == ["my_campaign.toml", "test_mechanisms.py", "tolerances.toml"]
     for name, text in files.items():
         (tmp_path / name).write_text(text)
@@ -67,7 +49,7 @@ def test_readme_example_runs_as_pasted(tmp_path):
 
 
 def test_selection_options_skip_other_cases_with_the_reason(tmp_path):
-    for name, text in readme_files().items():
+    for name, text in example_suite_files().items():
         (tmp_path / name).write_text(text)
     done = run_pytest(tmp_path, "-rs", "--mbh-adapters", "inhouse")
     assert done.returncode == 0, done.stdout + done.stderr

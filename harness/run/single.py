@@ -1,0 +1,108 @@
+"""One case from Python: a scene (by name, path or built mechanism), an adapter, a method and a
+step → a :class:`~harness.run.case.CaseResult` with its status, reason, metrics, trajectory and
+the row a campaign would store (``to_frame()``).
+
+The inputs are checked before anything runs, with the rules a campaign file's cases obey
+(:mod:`harness.run.spec`); every problem is named by its argument in one :class:`CaseInputError`.
+What the engine does with a valid case is a result (the row's status), never an exception.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from adapters import adapter_names, get_adapter
+from adapters.base import GRID_RTOL
+from harness.common.errors import MbhError
+from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from harness.model import scenario
+from harness.model.mechanism import Mechanism
+from harness.model.timegrid import steps_per_sample
+from harness.run.case import CaseResult
+from harness.run.row import run_spec
+from harness.run.spec import CaseSpec
+
+
+class CaseInputError(MbhError, ValueError):
+    """Raised once with every problem of a case's arguments, each as ``argument: problem``."""
+
+    def __init__(self, problems: list[str]):
+        self.problems = problems
+        super().__init__("\n".join(problems))
+
+
+def _checked_step(dt, t_end: float, mech: Mechanism, problems: list[str]) -> None:
+    """Record why ``dt`` (s) cannot run ``mech`` to ``t_end`` (s), if it cannot."""
+    if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) or dt <= 0:
+        problems.append(f"dt: expected a finite step > 0 (s), got {dt!r}")
+        return
+    try:
+        steps_per_sample(float(dt), mech.sample_step)
+    except ValueError as error:
+        problems.append(f"dt: {error}")
+        return
+    count = round(t_end / dt)
+    if count < 1 or abs(t_end - count * dt) > GRID_RTOL * max(t_end, dt):
+        problems.append(f"dt: step {dt!r} s does not divide t_end = {t_end!r} s")
+
+
+def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
+            dt: float = 1e-3, t_end: float | None = None, *, repetitions: int = 1,
+            bounds: Bounds = DEFAULT_BOUNDS, accuracy: float = DEFAULT_ACCURACY) -> CaseResult:
+    """Run one case against the scene's verified reference (built on first use) and measure it.
+
+    Parameters
+    ----------
+    scene : str, Path or Mechanism
+        A shipped scenario name, a scenario file, or a mechanism built in Python
+        (:class:`harness.model.builder.MechanismBuilder`).
+    adapter : str
+        Adapter name (``mbh adapters``).
+    method : str
+        Method string ``NAME[:key=value,...]`` (``mbh methods --adapter NAME``).
+    dt : float
+        Step, s: divides the scene's evaluation step and ``t_end``.
+    t_end : float, optional
+        End time, s, at most the scene's duration (default: the duration).
+    repetitions : int
+        Timed runs (the wall time is their median; the metrics come from the first).
+    bounds : Bounds
+        The verdict's bounds.
+    accuracy : float
+        Threshold on the main output's error (rad or m) for the ``accurate`` column.
+
+    Returns
+    -------
+    CaseResult
+        ``status``, ``reason``, ``metrics``, ``trajectory``, ``row`` and ``to_frame()``.
+
+    Raises
+    ------
+    ScenarioError
+        The scene does not load (every problem, naming the file and field).
+    CaseInputError
+        Any other argument is invalid (every problem, naming the argument).
+    """
+    mech = scene if isinstance(scene, Mechanism) else scenario.load(scene)
+    problems = []
+    if adapter not in adapter_names():
+        problems.append(f"adapter: unknown adapter {adapter!r} (known: {', '.join(adapter_names())})")
+    else:
+        try:
+            get_adapter(adapter).method_spec(method)
+        except ValueError as error:
+            problems.append(f"method: {error}")
+    duration = mech.duration if t_end is None else t_end
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not 0 < duration <= mech.duration:
+        problems.append(f"t_end: expected a time in (0, {mech.duration!r}] s, got {t_end!r}")
+    else:
+        _checked_step(dt, float(duration), mech, problems)
+    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
+        problems.append(f"repetitions: expected an integer >= 1, got {repetitions!r}")
+    if problems:
+        raise CaseInputError(problems)
+    name = mech.name if isinstance(scene, Mechanism) else str(scene)
+    spec = CaseSpec(name, adapter, method, float(dt), float(duration), repetitions)
+    return run_spec(spec, bounds, accuracy, mech=mech)
