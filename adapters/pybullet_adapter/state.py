@@ -56,6 +56,25 @@ def _poses(mech: Mechanism, states: BodyStates) -> dict[int, _Pose]:
     return poses
 
 
+def _link_poses(model: PybulletModel, uid: int, client: int) -> dict[int, _Pose] | None:
+    """Body index → :class:`_Pose` read straight from Bullet's link states (ground as -1), for the
+    loads applied before every step: one ``getLinkStates`` call and one vectorised rotation
+    conversion, without the quaternion round trip of :func:`_read_states` (which costs ~60 µs a
+    step on four bodies, measured).  None when an orientation is not finite or not a unit
+    quaternion (a blown-up state: the caller falls back to :func:`_read_states`)."""
+    rows = pybullet.getLinkStates(uid, list(model.body_links), computeLinkVelocity=1,
+                                  computeForwardKinematics=1, physicsClientId=client)
+    quats = np.array([row[1] for row in rows], dtype=float)
+    if not (np.all(np.isfinite(quats)) and np.all(np.abs(np.sum(quats * quats, axis=1) - 1) < 0.5)):
+        return None
+    rotations = Rotation.from_quat(quats).as_matrix() @ np.transpose(model.principal, (0, 2, 1))
+    poses = {-1: _Pose(np.zeros(3), np.eye(3), np.zeros(3), np.zeros(3))}
+    for index, row in enumerate(rows):
+        poses[index] = _Pose(np.array(row[0]), rotations[index], np.array(row[6]),
+                             np.array(row[7]))
+    return poses
+
+
 def _link_rotation(mech: Mechanism, pose: _Pose, body: int) -> np.ndarray:
     """Orientation of ``body``'s link frame (world-parallel at the reference), shape (3, 3)."""
     return pose.rotation if body < 0 else pose.rotation @ mech.bodies[body].rotation.T
