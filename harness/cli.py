@@ -292,7 +292,7 @@ def cmd_run(args) -> int:
     try:
         store = run_campaign(campaign, workers=args.workers, scheduler=args.scheduler,
                              resume=args.resume, reuse=args.reuse, root=_results_root(args),
-                             quiet=args.quiet)
+                             quiet=args.quiet, warm_workers=not args.cold_workers)
     except RunnerError as error:
         raise UserError(str(error)) from None
     except CampaignInterrupted as stop:  # before KeyboardInterrupt: it is one
@@ -531,6 +531,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--scheduler", default=None, help="Dask scheduler address, tcp://HOST:PORT")
     p.add_argument("--resume", default=None, metavar="RUN", help="complete interrupted run RUN")
     p.add_argument("--reuse", action="store_true", help="copy identical cases from the cache")
+    p.add_argument("--cold-workers", action="store_true",
+                   help="start every case in a fresh interpreter instead of forking it from the "
+                        "warm template (slower; for comparison)")
     p.add_argument("--quiet", action="store_true", help="no progress bar, no notes")
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_run)

@@ -215,12 +215,12 @@ def _cache_settings(campaign) -> str:
                        "accuracy": campaign.accuracy}, sort_keys=True)
 
 
-def _calibrate(store: RunStore, work, scheduler, say) -> None:
+def _calibrate(store: RunStore, work, backend: dict, say) -> None:
     """Run the calibration case alone and store its wall time (a failed one is reported)."""
     from harness.run.row import calibration_spec
 
     rows = []
-    execute([calibration_spec()], work, workers=1, scheduler=scheduler,
+    execute([calibration_spec()], work, workers=1, **backend,
             on_result=lambda spec, row, trajectory: rows.append(row), progress=False)
     row = rows[0]
     seconds = row.get("wall_time_s")
@@ -231,7 +231,7 @@ def _calibrate(store: RunStore, work, scheduler, say) -> None:
             f"has no machine-speed figure")
 
 
-def _sweep(campaign, store: RunStore, work, workers, scheduler, quiet: bool) -> None:
+def _sweep(campaign, store: RunStore, work, workers, backend: dict, quiet: bool) -> None:
     """Run the campaign's stability sweep (searches with a stored row are skipped)."""
     from harness.run.spec import DEFAULT_TIMEOUT_S, CaseSpec
 
@@ -248,7 +248,7 @@ def _sweep(campaign, store: RunStore, work, workers, scheduler, quiet: bool) -> 
 
     def run(specs):
         rows = {}
-        execute(specs, work, workers=workers, scheduler=scheduler, progress=not quiet,
+        execute(specs, work, workers=workers, **backend, progress=not quiet,
                 on_result=lambda spec, row, trajectory: rows.__setitem__(spec.case_id, row))
         return rows
 
@@ -257,7 +257,7 @@ def _sweep(campaign, store: RunStore, work, workers, scheduler, quiet: bool) -> 
 
 def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None = None,
                  resume: str | None = None, reuse: bool = False, root=None, quiet: bool = False,
-                 work=None) -> RunStore:
+                 work=None, warm_workers: bool = True) -> RunStore:
     """Run ``campaign`` (a :class:`harness.run.spec.Campaign`) into the result store.
 
     Parameters
@@ -277,6 +277,9 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     work : callable, optional
         ``work(spec) -> (row, trajectory)`` run in the workers; default :class:`CaseWork` with
         the campaign's bounds and accuracy.
+    warm_workers : bool
+        Locally, fork each case's process from the warm template (default) rather than start a
+        fresh interpreter per case (:class:`harness.run.executor.WorkerProcesses`).
 
     Returns
     -------
@@ -295,10 +298,12 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     """
     with stop_signals_interrupt():
         return _run_campaign(campaign, workers=workers, scheduler=scheduler, resume=resume,
-                             reuse=reuse, root=root, quiet=quiet, work=work)
+                             reuse=reuse, root=root, quiet=quiet, work=work,
+                             warm_workers=warm_workers)
 
 
-def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, work) -> RunStore:
+def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, work,
+                  warm_workers) -> RunStore:
     def say(text):
         if not quiet:
             print(text, file=sys.stderr)
@@ -312,10 +317,11 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)
     prepare_references(names, say)
+    backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)
     try:
         if campaign.calibration and store.calibration_s is None:
-            _calibrate(store, work, scheduler, say)
+            _calibrate(store, work, backend, say)
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]
         recorder = _Recorder(store, CaseCache(root), _cache_keys(
@@ -323,10 +329,10 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
             _cache_settings(campaign))
         if reuse:
             todo = recorder.reuse(todo)
-        execute(todo, work, workers=workers, scheduler=scheduler, on_result=recorder.record,
+        execute(todo, work, workers=workers, **backend, on_result=recorder.record,
                 progress=not quiet)
         if campaign.sweep is not None:
-            _sweep(campaign, store, work, workers, scheduler, quiet)
+            _sweep(campaign, store, work, workers, backend, quiet)
     except KeyboardInterrupt as stop:
         store.finish("interrupted")
         raise CampaignInterrupted(store, getattr(stop, "signum", signal.SIGINT)) from None

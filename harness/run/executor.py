@@ -1,9 +1,19 @@
-"""Run campaign cases, each in a fresh worker process, locally or on a Dask cluster.
+"""Run campaign cases, each in a worker process of its own, locally or on a Dask cluster.
 
-Every case runs in its own Python process (:func:`run_isolated`): a child interpreter started for
-that case alone, with one BLAS/OpenMP/numba thread (:data:`WORKER_ENV`, set in its environment
-before anything imports numpy), in a process group of its own.  What can go wrong in an engine
-therefore becomes a row and never ends the campaign:
+Every case runs in its own Python process (:func:`run_isolated`), with one BLAS/OpenMP/numba
+thread (:data:`WORKER_ENV`, set before anything imports numpy), in a process group of its own:
+
+* warm (local default): forked by :mod:`multiprocessing`'s fork server from a template process
+  that has imported numpy, scipy, the harness and the engines and loaded the compiled in-house
+  kernels once (:mod:`harness.run.warm`); a case's process starts in ~0.05 s instead of the
+  1–3 s of a fresh interpreter (``benchmarks/worker_start.py`` measures both side by side);
+* cold: a fresh interpreter per case (``python -m harness.run.executor``), as on Dask, where a
+  worker process may not fork children of its own.
+
+Either way a worker dies with its parent: the kernel kills it when the process that started it
+dies (:func:`die_with_parent`; a warm worker's parent is the fork server, which exits with the
+campaign's process), so a campaign killed by SIGKILL leaves no case running.  What can go wrong in
+an engine becomes a row and never ends the campaign:
 
 * the case outlives its wall-clock limit → its process group is killed, status ``timeout``;
 * the process dies (SIGKILL from the kernel's OOM killer, a segfault, an abort) or exits without a
@@ -28,7 +38,10 @@ re-raised after every finished case has been handed over.
 
 from __future__ import annotations
 
+import ctypes
 import faulthandler
+import multiprocessing
+import multiprocessing.forkserver
 import os
 import pickle
 import signal
@@ -60,46 +73,148 @@ class _Stopped(Exception):
     """The executor was interrupted; no new worker may start."""
 
 
+# --- dying with the parent ------------------------------------------------------------------
+
+_PR_SET_PDEATHSIG = 1
+
+
+def die_with_parent(parent: int | None) -> None:
+    """Have the kernel SIGKILL this process when its parent dies (Linux ``prctl``
+    PR_SET_PDEATHSIG), so a campaign killed by SIGKILL leaves no case running; then exit at once
+    if the parent is already gone (it died before the request took effect): ``parent`` is its pid
+    as the parent knew it, or None to check only that the process was not adopted by init.
+    Elsewhere (no ``prctl``) a worker outlives a killed parent until its case ends."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    except (OSError, AttributeError):
+        return
+    if os.getppid() == 1 or (parent is not None and os.getppid() != parent):
+        os._exit(signal.SIGKILL + 128)
+
+
+# --- worker processes -----------------------------------------------------------------------
+
+class _ColdWorker:
+    """A case in a fresh interpreter (``python -m harness.run.executor RESULT PARENT``, the work
+    sent on stdin, :data:`WORKER_ENV`, its own process group, output captured)."""
+
+    def __init__(self, work: Callable, spec, result_path: Path):
+        self._payload = pickle.dumps((list(sys.path), pickle.dumps((work, spec))))
+        self.process = subprocess.Popen(
+            [sys.executable, "-m", "harness.run.executor", str(result_path), str(os.getpid())],
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+            env=os.environ | WORKER_ENV, process_group=0)
+        self._output = b""
+
+    def wait(self, timeout_s: float) -> int:
+        """The exit code (negative: the signal); raises subprocess.TimeoutExpired."""
+        self._output, _ = self.process.communicate(self._payload, timeout=timeout_s)
+        return self.process.returncode
+
+    def kill(self) -> None:
+        _kill_group(self.process.pid)
+
+    def output(self) -> bytes:
+        """What the worker printed (after :meth:`wait`, or after :meth:`kill` to reap it)."""
+        if self.process.returncode is None:
+            self._output, _ = self.process.communicate()
+        return self._output
+
+
+class _ForkedWorker:
+    """A case in a process forked from the warm template (:mod:`harness.run.warm`), output to a
+    file beside the result, in a process group of its own."""
+
+    def __init__(self, context, work: Callable, spec, result_path: Path):
+        self._output_path = result_path.with_name("output.txt")
+        self.process = context.Process(target=_forked_main, name="mbh-case",
+                                       args=(str(result_path), str(self._output_path), work, spec))
+        self.process.start()
+
+    def wait(self, timeout_s: float) -> int:
+        self.process.join(timeout_s)
+        if self.process.exitcode is None:
+            raise subprocess.TimeoutExpired("mbh-case", timeout_s)
+        return self.process.exitcode
+
+    def kill(self) -> None:
+        _kill_group(self.process.pid)
+
+    def output(self) -> bytes:
+        self.process.join()
+        try:
+            return self._output_path.read_bytes()
+        except OSError:
+            return b""
+
+
 class WorkerProcesses:
-    """The running worker processes of one execution, so that an interrupt can end them all."""
+    """Starts the worker of every case of one execution, warm (forked from a template process
+    that has already imported and loaded everything: :mod:`harness.run.warm`) or cold (a fresh
+    interpreter), and kills them all on an interrupt.
 
-    def __init__(self):
+    Parameters
+    ----------
+    warm : bool
+        Fork workers from the warm template.  If the template cannot start (or a fork fails),
+        the workers start cold and a note on stderr says so once.
+    """
+
+    _context = None  # the fork server's context, shared by every execution of this process
+
+    def __init__(self, warm: bool = True):
         self._lock = threading.Lock()
-        self._running: set[subprocess.Popen] = set()
+        self._running: set = set()
         self._closed = False
+        self.warm = warm
 
-    def start(self, command: list[str]) -> subprocess.Popen:
-        """Start a worker (its own process group, :data:`WORKER_ENV`, output captured).
+    @classmethod
+    def _fork_context(cls):
+        if cls._context is None:
+            cls._context = multiprocessing.get_context("forkserver")
+            cls._context.set_forkserver_preload(["harness.run.warm"])
+        return cls._context
 
-        Raises _Stopped after :meth:`close`.
-        """
+    def start(self, work: Callable, spec, result_path: Path):
+        """Start the worker of one case.  Raises _Stopped after :meth:`close`."""
         with self._lock:
             if self._closed:
                 raise _Stopped
-            process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                       stderr=subprocess.STDOUT, env=os.environ | WORKER_ENV,
-                                       process_group=0)
-            self._running.add(process)
-            return process
+            worker = None
+            if self.warm:
+                try:
+                    worker = _ForkedWorker(self._fork_context(), work, spec, result_path)
+                except (OSError, EOFError, ValueError) as error:
+                    self.warm = False
+                    print(f"mbh: warm workers unavailable ({type(error).__name__}: {error}); "
+                          f"cases start in fresh interpreters", file=sys.stderr)
+            if worker is None:
+                worker = _ColdWorker(work, spec, result_path)
+            self._running.add(worker)
+            return worker
 
-    def finished(self, process: subprocess.Popen) -> None:
+    def finished(self, worker) -> None:
         with self._lock:
-            self._running.discard(process)
+            self._running.discard(worker)
 
     def close(self) -> None:
         """Kill every running worker and refuse new ones."""
         with self._lock:
             self._closed = True
-            for process in self._running:
-                _kill(process)
+            for worker in self._running:
+                worker.kill()
 
 
-def _kill(process: subprocess.Popen) -> None:
-    """SIGKILL the worker's whole process group (anything it started dies with it)."""
-    try:
-        os.killpg(process.pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
+def _kill_group(pid: int) -> None:
+    """SIGKILL a worker's whole process group (anything it started dies with it), or the worker
+    alone if it has not made its group yet."""
+    for kill in (os.killpg, os.kill):
+        try:
+            kill(pid, signal.SIGKILL)
+            return
+        except ProcessLookupError:
+            continue
 
 
 def _exit_reason(returncode: int, output: bytes) -> str:
@@ -112,13 +227,19 @@ def _exit_reason(returncode: int, output: bytes) -> str:
         what = f"worker process killed by {name}"
     else:
         what = f"worker process exited with code {returncode} without a result"
-    tail = output.decode(errors="replace").strip()[-OUTPUT_TAIL:]
+    lines = output.decode(errors="replace").strip().splitlines()
+    # faulthandler ends a crash report with every loaded extension module (one line of a few
+    # thousand characters in a warm worker): not why it died.
+    text = "\n".join(line for line in lines if not line.startswith("Extension modules:"))
+    report = text.find("Fatal Python error")
+    # A crash report's head (the error, then the innermost frames first); else the last output.
+    tail = text[report:report + OUTPUT_TAIL] if report >= 0 else text[-OUTPUT_TAIL:]
     return f"{what}; its last output: {tail}" if tail else what
 
 
 def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
                  workers: WorkerProcesses | None = None) -> tuple[dict, object]:
-    """Run ``work(spec)`` in a fresh child process and return its ``(row, trajectory)``.
+    """Run ``work(spec)`` in a process of its own and return its ``(row, trajectory)``.
 
     Parameters
     ----------
@@ -128,48 +249,46 @@ def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
     spec : CaseSpec
         The case (picklable).
     timeout_s : float
-        Wall-clock limit of the whole child, interpreter start included, s.
+        Wall-clock limit of the whole child, its start included, s.
     failure_row : callable
         ``failure_row(spec, status, reason) -> row`` for a case that gave no result
         (:func:`harness.run.row.error_row`).
     workers : WorkerProcesses, optional
-        Registry the child is started through (an interrupt kills it there).
+        Registry the child is started through (an interrupt kills it there); default: a cold
+        worker of its own (a Dask task, one-off callers).
 
     Returns
     -------
     (dict, Trajectory or None)
         The work's row and trajectory; or a ``timeout``/``crashed`` row and None.
     """
-    workers = workers or WorkerProcesses()
+    workers = workers or WorkerProcesses(warm=False)
     with tempfile.TemporaryDirectory(prefix="mbh-case-") as folder:
         result_path = Path(folder) / "result.pickle"
-        payload = pickle.dumps((list(sys.path), pickle.dumps((work, spec))))
-        process = workers.start([sys.executable, "-m", "harness.run.executor", str(result_path)])
+        worker = workers.start(work, spec, result_path)
         try:
-            output, _ = process.communicate(payload, timeout=timeout_s)
+            returncode = worker.wait(timeout_s)
         except subprocess.TimeoutExpired:
-            _kill(process)
-            process.communicate()
+            worker.kill()
+            worker.output()
             return failure_row(spec, "timeout", f"no result within the case timeout of "
                                                 f"{timeout_s:g} s; worker process killed"), None
         finally:
-            workers.finished(process)
-        if process.returncode != 0 or not result_path.exists():
-            return failure_row(spec, "crashed", _exit_reason(process.returncode, output)), None
+            workers.finished(worker)
+        if returncode != 0 or not result_path.exists():
+            return failure_row(spec, "crashed", _exit_reason(returncode, worker.output())), None
         kind, value = pickle.loads(result_path.read_bytes())
     if kind == "raised":
         return failure_row(spec, "crashed", f"worker raised {value}"), None
     return value
 
 
-def _child_main(result_path: str) -> None:
-    """Worker side of :func:`run_isolated`: read (sys.path, work, spec) from stdin, run, write the
-    pickled ``("done", (row, trajectory))`` or ``("raised", message)`` atomically, exit at once."""
+def _run_and_exit(result_path: str, load_case: Callable) -> None:
+    """Worker side: ``work, spec = load_case()``, run, write the pickled ``("done", (row,
+    trajectory))`` or ``("raised", message)`` atomically, exit at once."""
     faulthandler.enable()  # a segfault prints the Python stack into the captured output
-    sys_path, inner = pickle.loads(sys.stdin.buffer.read())
-    sys.path[:0] = [entry for entry in sys_path if entry not in sys.path]
     try:
-        work, spec = pickle.loads(inner)
+        work, spec = load_case()
         data = pickle.dumps(("done", work(spec)))
     except BaseException as error:  # noqa: BLE001 — every failure of the case becomes its row
         last = traceback.extract_tb(error.__traceback__)[-1:] or [None]
@@ -183,6 +302,31 @@ def _child_main(result_path: str) -> None:
     os._exit(0)  # skip interpreter teardown: some engine libraries hang or crash in it
 
 
+def _child_main(result_path: str, parent: str) -> None:
+    """A cold worker: (sys.path, work, spec) from stdin."""
+    die_with_parent(int(parent))
+    sys_path, inner = pickle.loads(sys.stdin.buffer.read())
+    sys.path[:0] = [entry for entry in sys_path if entry not in sys.path]
+    _run_and_exit(result_path, lambda: pickle.loads(inner))
+
+
+def _forked_main(result_path: str, output_path: str, work: Callable, spec) -> None:
+    """A warm worker, forked from the template: its own process group, killed with the fork
+    server (which exits with the campaign's process), output into ``output_path``."""
+    os.setpgid(0, 0)
+    # The fork server exits when every holder of its "alive" pipe's write end has gone; it hands
+    # that end to each process it forks, so a running case would keep it (and itself) alive
+    # after the campaign's death.  Dropping it lets the server exit and the kernel kill the case.
+    alive = getattr(multiprocessing.forkserver._forkserver, "_forkserver_alive_fd", None)
+    if alive is not None:
+        os.close(alive)
+    die_with_parent(None)
+    output = os.open(output_path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    for stream in (1, 2):
+        os.dup2(output, stream)
+    _run_and_exit(result_path, lambda: (work, spec))
+
+
 def _default_failure_row() -> Callable:
     from harness.run.row import error_row
 
@@ -192,7 +336,7 @@ def _default_failure_row() -> Callable:
 def execute(specs: Iterable, work: Callable, *, workers: int | None = None,
             scheduler: str | None = None, timeout_s: float | None = None,
             on_result: Callable, progress: bool = True,
-            failure_row: Callable | None = None) -> None:
+            failure_row: Callable | None = None, warm: bool = True) -> None:
     """Run every spec in its own worker process and hand each result to ``on_result``.
 
     Parameters
@@ -213,6 +357,9 @@ def execute(specs: Iterable, work: Callable, *, workers: int | None = None,
         Draw the progress bar (only when stderr is a terminal).
     failure_row : callable, optional
         ``failure_row(spec, status, reason) -> row``; default :func:`harness.run.row.error_row`.
+    warm : bool
+        Local backend: fork each case's process from the warm template (default) rather than
+        start a fresh interpreter (:class:`WorkerProcesses`).
 
     Raises
     ------
@@ -228,13 +375,14 @@ def execute(specs: Iterable, work: Callable, *, workers: int | None = None,
             bar.update(row)
 
         if scheduler is None:
-            _run_local(specs, limits, work, workers or usable_cores(), failure_row, finished)
+            _run_local(specs, limits, work, workers or usable_cores(), failure_row, finished,
+                       warm)
         else:
             _run_dask(specs, limits, work, scheduler, failure_row, finished)
 
 
-def _run_local(specs, limits, work, workers, failure_row, finished) -> None:
-    processes = WorkerProcesses()
+def _run_local(specs, limits, work, workers, failure_row, finished, warm) -> None:
+    processes = WorkerProcesses(warm)
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="mbh-worker")
     futures = {pool.submit(run_isolated, work, spec, limit, failure_row, processes): spec
                for spec, limit in zip(specs, limits)}
@@ -269,4 +417,4 @@ def _run_dask(specs, limits, work, scheduler, failure_row, finished) -> None:
 
 
 if __name__ == "__main__":
-    _child_main(sys.argv[1])
+    _child_main(sys.argv[1], sys.argv[2])

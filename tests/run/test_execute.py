@@ -1,14 +1,20 @@
-"""The executor (harness.run.executor): one fresh process per case; a hang, a kill, a segfault or an
-exception in a case becomes that case's row, the other cases still run, and an interrupt kills the
-running workers.  Driven by a toy work function (defined here, run in the worker processes)."""
+"""The executor (harness.run.executor): one process per case, warm (forked from the template) or
+cold (a fresh interpreter); a hang, a kill, a segfault or an exception in a case becomes that
+case's row, the other cases still run, an interrupt kills the running workers, and workers die
+with a campaign process killed by SIGKILL.  Driven by a toy work function (defined here, run in the
+worker processes)."""
 
 from __future__ import annotations
 
 import ctypes
 import os
 import signal
+import subprocess
+import sys
 import time
 from dataclasses import dataclass
+
+from pathlib import Path
 
 import pytest
 
@@ -73,8 +79,44 @@ def check_misbehaving_rows(rows: dict[str, dict]) -> None:
         assert all(rows[name][key] == "1" for key in WORKER_ENV)
 
 
-def test_local_pool_turns_every_failure_into_a_row():
-    check_misbehaving_rows(run_toys(MISBEHAVING, workers=2))
+@pytest.mark.parametrize("warm", [True, False], ids=["warm", "cold"])
+def test_local_pool_turns_every_failure_into_a_row(warm):
+    check_misbehaving_rows(run_toys(MISBEHAVING, workers=2, warm=warm))
+
+
+CAMPAIGN_PROCESS = """
+import sys
+from harness.run.executor import execute
+from tests.run.test_execute import ToySpec, toy_failure_row, toy_work
+execute([ToySpec("sleep", timeout_s=600.0, pid_file=sys.argv[1])], toy_work, workers=1,
+        failure_row=toy_failure_row, progress=False, on_result=print, warm=sys.argv[2] == "warm")
+"""
+
+
+@pytest.mark.parametrize("warm", ["warm", "cold"])
+def test_workers_die_with_a_campaign_process_killed_by_sigkill(tmp_path, warm):
+    pid_file = tmp_path / "case.pid"
+    campaign = subprocess.Popen([sys.executable, "-c", CAMPAIGN_PROCESS, str(pid_file), warm],
+                                cwd=Path(__file__).resolve().parents[2])
+    try:
+        for _ in range(600):  # the case is running (its pid written)
+            if pid_file.exists() and pid_file.read_text():
+                break
+            time.sleep(0.1)
+        worker = int(pid_file.read_text())
+        campaign.kill()
+        campaign.wait()
+        for _ in range(100):  # the kernel kills it (parent-death signal), within 10 s
+            try:
+                os.kill(worker, 0)
+            except ProcessLookupError:
+                break
+            time.sleep(0.1)
+        else:
+            os.kill(worker, signal.SIGKILL)
+            pytest.fail(f"{warm} worker {worker} outlived its campaign process")
+    finally:
+        campaign.kill()
 
 
 def test_one_worker_runs_every_case_after_failures():

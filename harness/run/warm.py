@@ -1,0 +1,55 @@
+"""The template every warm worker is forked from: imported once by the fork server
+(:mod:`multiprocessing.forkserver`, the ``preload`` of :class:`harness.run.executor.WarmWorkers`),
+it sets the one-thread environment, imports numpy, scipy, the harness and every registered engine,
+and runs a few tiny cases so the compiled in-house kernels are loaded from numba's cache.  Each
+case's process is then forked from this state: a fresh process per case (a crash stays a row) that
+starts in milliseconds instead of seconds (docs/speed.md, "Worker start").
+
+Nothing here changes a result: the warm-up cases are thrown away, and every module-level cache they
+fill (compiled code, loaded references) holds what a cold worker computes or loads for itself.
+"""
+
+from __future__ import annotations
+
+import os
+
+from harness.run.executor import WORKER_ENV
+
+# Before numpy and the engines load their thread pools: one thread per case.
+os.environ.update(WORKER_ENV)
+
+#: (scenario, adapter, method, dt, t_end) run once in the template, their results discarded: the
+#: planar and spatial in-house paths (default and best methods, which load most kernels) and an
+#: engine.  A kernel they miss is loaded by the first case that needs it, as in a cold worker.
+WARM_UP = (
+    ("fourbar", "inhouse", "best", 1e-3, 0.02),
+    ("fourbar", "inhouse", "default", 1e-3, 0.02),
+    ("fourbar_spatial", "inhouse", "best", 1e-3, 0.02),
+    ("fourbar", "mujoco", "best", 1e-3, 0.02),
+)
+
+
+def _warm_up() -> list[str]:
+    """Import the engines and run :data:`WARM_UP`; returns what could not be warmed (a warm-up
+    failure only costs the cases the load time it would have saved)."""
+    from adapters import adapter_names, get_adapter
+    from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
+    from harness.run.row import run_spec
+    from harness.run.spec import CaseSpec
+
+    missed = []
+    for name in adapter_names():
+        try:
+            get_adapter(name)
+        except Exception as error:  # noqa: BLE001 — an engine that fails to import fails its cases
+            missed.append(f"adapter {name}: {error}")
+    for scene, adapter, method, dt, t_end in WARM_UP:
+        try:
+            run_spec(CaseSpec(scene, adapter, method, dt, t_end), DEFAULT_BOUNDS, DEFAULT_ACCURACY)
+        except Exception as error:  # noqa: BLE001 — see above
+            missed.append(f"{scene}/{adapter}/{method}: {error}")
+    return missed
+
+
+#: What the warm-up could not do, for diagnostics (``python -c "import harness.run.warm"``).
+MISSED = _warm_up()
