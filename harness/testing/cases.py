@@ -1,11 +1,14 @@
-"""Harness cases run inside the caller's process, for tolerance assertions (:mod:`harness.testing.tolerances`)
-and the pytest plugin (:mod:`harness.testing.plugin`).
+"""Harness cases for tolerance assertions (:mod:`harness.testing.tolerances`) and the pytest
+plugin (:mod:`harness.testing.plugin`), run in the caller's process or, isolated, in a worker
+process of their own.
 
 * :class:`CaseRunner` runs cases (:func:`harness.run.row.run_spec`: the same build → simulate →
   verdict → metrics as a campaign) and keeps every finished case for the session, so a
   parametrized suite that asks for a case twice runs it once; it also loads references and runs
   the calibration case (:func:`harness.run.row.calibration_spec`) once, for calibrated time
-  ratios;
+  ratios.  An isolated case runs as a campaign's does (:func:`harness.run.executor.run_isolated`):
+  an engine that crashes or hangs gives a ``crashed`` or ``timeout`` case, the signal named in its
+  reason, and the test session goes on;
 * :func:`campaign_cases`, a campaign file turned into (readable id, case) pairs for parametrized
   tests (ids like ``fourbar-mujoco-best-dt1e-3``), and :class:`Selection`, the command line's
   choice of scenarios and adapters.
@@ -209,8 +212,23 @@ class SessionCase:
         return values[reference_indices(self.reference, self.trajectory.times)]
 
 
+@dataclass(frozen=True)
+class IsolatedWork:
+    """What an isolated case's worker process does: :func:`harness.run.row.run_spec`, returning
+    (row, the whole result) for :func:`harness.run.executor.run_isolated`.  Picklable."""
+
+    bounds: Bounds
+    accuracy: float
+
+    def __call__(self, spec: CaseSpec) -> tuple[dict, CaseResult]:
+        from harness.run.row import run_spec
+
+        result = run_spec(spec, self.bounds, self.accuracy)
+        return result.row, result
+
+
 class CaseRunner:
-    """Runs cases in this process and keeps them for the session.
+    """Runs cases, in this process or isolated, and keeps them for the session.
 
     Parameters
     ----------
@@ -225,6 +243,7 @@ class CaseRunner:
         self._results: dict[str, SessionCase] = {}
         self._references: dict[str, Trajectory | None] = {}
         self._calibration_s: float | None = None
+        self._workers = None  # the isolated cases' warm workers, started on first use
 
     @property
     def finished(self) -> dict[str, SessionCase]:
@@ -259,21 +278,44 @@ class CaseRunner:
             self._calibration_s = float(row["wall_time_s"])
         return self._calibration_s
 
-    def run(self, spec: CaseSpec) -> SessionCase:
-        """The finished case ``spec`` (run now unless already run this session)."""
-        from harness.run.row import run_spec
-
+    def run(self, spec: CaseSpec, isolated: bool = False) -> SessionCase:
+        """The finished case ``spec`` (run now unless already run this session, in a worker
+        process of its own when ``isolated``)."""
         if spec.case_id not in self._results:
             self.reference(spec.scenario)  # loaded once per session, not once per case
+            result = self._isolated(spec) if isolated else self._in_process(spec)
             self._results[spec.case_id] = SessionCase(
-                spec, run_spec(spec, self.bounds, self.accuracy), scenario.load(spec.scenario),
-                self.reference(spec.scenario), self.calibration_s)
+                spec, result, scenario.load(spec.scenario), self.reference(spec.scenario),
+                self.calibration_s)
         return self._results[spec.case_id]
 
+    def _in_process(self, spec: CaseSpec) -> CaseResult:
+        from harness.run.row import run_spec
+
+        return run_spec(spec, self.bounds, self.accuracy)
+
+    def _isolated(self, spec: CaseSpec) -> CaseResult:
+        """``spec`` run in a worker process; a case that gave no result (crash, timeout) becomes
+        an empty trajectory with the row's status and reason (the signal or exit code)."""
+        from harness.run.executor import WorkerProcesses, run_isolated
+        from harness.run.row import error_row
+
+        if self._workers is None:
+            self._workers = WorkerProcesses(warm=True)
+        row, result = run_isolated(IsolatedWork(self.bounds, self.accuracy), spec, spec.timeout_s,
+                                   error_row, self._workers)
+        if result is not None:
+            return result
+        n_bodies = len(scenario.load(spec.scenario).bodies)
+        return CaseResult(Trajectory.empty(n_bodies, status=row["status"], reason=row["reason"]),
+                          {}, row)
+
     def case(self, scenario_name: str, adapter: str, method: str, dt: float,
-             t_end: float | None = None, repetitions: int = 1) -> SessionCase:
+             t_end: float | None = None, repetitions: int = 1,
+             isolated: bool = False) -> SessionCase:
         """:meth:`run` of :func:`case_spec` (same arguments)."""
-        return self.run(case_spec(scenario_name, adapter, method, dt, t_end, repetitions))
+        return self.run(case_spec(scenario_name, adapter, method, dt, t_end, repetitions),
+                        isolated)
 
     def steps(self, scenario_name: str, adapter: str, method: str, dts,
               t_end: float | None = None) -> list[SessionCase]:

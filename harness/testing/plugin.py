@@ -12,7 +12,12 @@ Thin wrappers over :mod:`harness.testing.cases` and :mod:`harness.testing.tolera
 * :func:`campaign_params`: a campaign's cases as ``pytest.param`` objects with readable ids
   (``fourbar-mujoco-best-dt1e-3``), for ``@pytest.mark.parametrize``;
 * options ``--mbh-scenarios A,B`` and ``--mbh-adapters X,Y``: only those run; a test
-  parametrized with an unselected case is skipped at collection, with the reason.
+  parametrized with an unselected case is skipped at collection, with the reason;
+* option ``--mbh-isolated`` and marker ``@pytest.mark.mbh_isolated``: the cases of every test
+  (of the marked tests) run each in a worker process of its own, as a campaign's do, so an engine
+  that crashes or hangs fails that test (status ``crashed`` or ``timeout``, the signal named) and
+  the session goes on.  In-process is the default: isolation costs a process start per case
+  (docs/formats/tolerances.md, "Isolated cases", gives the measured cost).
 
 The assertion helpers are the plain functions of :mod:`harness.testing.tolerances`.  This module imports
 nothing heavy at load time: pytest loads it in every session of this environment.
@@ -36,9 +41,17 @@ def pytest_addoption(parser) -> None:
     group.addoption("--mbh-adapters", default=None, metavar="X,Y",
                     help="run only cases of these adapters (comma-separated); the others are "
                          "skipped with the reason")
+    group.addoption("--mbh-isolated", action="store_true", default=False,
+                    help="run every case in a worker process of its own (a crash fails one "
+                         "test; the marker mbh_isolated does it for one test)")
     group.addoption("--mbh-tolerances", default=None, metavar="FILE",
                     help=f"tolerance file of the fixture mbh_tolerances (default: "
                          f"{TOLERANCE_FILE} beside each test file)")
+
+
+def pytest_configure(config) -> None:
+    config.addinivalue_line("markers", "mbh_isolated: run this test's mbh cases each in a worker "
+                                       "process of its own (a crash fails the test, not the session)")
 
 
 def _selection(config):
@@ -88,6 +101,8 @@ class _SelectingRunner:
 
     def __init__(self, runner, selection):
         self._runner, self._selection = runner, selection
+        #: Whether the current test's cases run isolated (set before each test that uses it).
+        self.isolated = False
 
     def __getattr__(self, name):
         return getattr(self._runner, name)
@@ -96,7 +111,7 @@ class _SelectingRunner:
         reason = self._selection.reason(spec)
         if reason is not None:
             pytest.skip(f"mbh: {reason}")
-        return self._runner.run(spec)
+        return self._runner.run(spec, isolated=self.isolated)
 
     def case(self, *args, **kwargs):
         from harness.testing.cases import case_spec
@@ -114,6 +129,16 @@ def mbh_runner(request):
     from harness.testing.cases import CaseRunner
 
     return _SelectingRunner(CaseRunner(), _selection(request.config))
+
+
+@pytest.fixture(autouse=True)
+def _mbh_isolation(request):
+    """Before each test that uses ``mbh_runner``: isolate its cases when ``--mbh-isolated`` is given
+    or the test is marked ``mbh_isolated`` (other tests never load the harness)."""
+    if "mbh_runner" in request.fixturenames:
+        request.getfixturevalue("mbh_runner").isolated = bool(
+            request.config.getoption("--mbh-isolated")
+            or request.node.get_closest_marker("mbh_isolated"))
 
 
 @pytest.fixture(scope="session")
