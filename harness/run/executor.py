@@ -124,12 +124,16 @@ class _ColdWorker:
 
 class _ForkedWorker:
     """A case in a process forked from the warm template (:mod:`harness.run.warm`), output to a
-    file beside the result, in a process group of its own."""
+    file beside the result, in a process group of its own, with this process's working folder,
+    environment (plus :data:`WORKER_ENV`) and ``sys.path`` as they are now, not as they were when
+    the template started."""
 
     def __init__(self, context, work: Callable, spec, result_path: Path):
         self._output_path = result_path.with_name("output.txt")
+        here = (os.getcwd(), dict(os.environ) | WORKER_ENV, list(sys.path))
         self.process = context.Process(target=_forked_main, name="mbh-case",
-                                       args=(str(result_path), str(self._output_path), work, spec))
+                                       args=(str(result_path), str(self._output_path), here,
+                                             work, spec))
         self.process.start()
 
     def wait(self, timeout_s: float) -> int:
@@ -310,10 +314,16 @@ def _child_main(result_path: str, parent: str) -> None:
     _run_and_exit(result_path, lambda: pickle.loads(inner))
 
 
-def _forked_main(result_path: str, output_path: str, work: Callable, spec) -> None:
+def _forked_main(result_path: str, output_path: str, here: tuple, work: Callable, spec) -> None:
     """A warm worker, forked from the template: its own process group, killed with the fork
-    server (which exits with the campaign's process), output into ``output_path``."""
+    server (which exits with the campaign's process), output into ``output_path``, in the
+    starting process's working folder, environment and ``sys.path`` (``here``)."""
     os.setpgid(0, 0)
+    folder, environment, sys_path = here
+    os.chdir(folder)
+    os.environ.clear()
+    os.environ.update(environment)
+    sys.path[:0] = [entry for entry in sys_path if entry not in sys.path]
     # The fork server exits when every holder of its "alive" pipe's write end has gone; it hands
     # that end to each process it forks, so a running case would keep it (and itself) alive
     # after the campaign's death.  Dropping it lets the server exit and the kernel kill the case.

@@ -46,7 +46,9 @@ def toy_work(spec: ToySpec):
     if spec.name.startswith("exit"):
         os._exit(3)
     print("engine chatter on stdout")
-    return {"name": spec.name, "status": "ok", **{k: os.environ.get(k) for k in WORKER_ENV}}, None
+    return {"name": spec.name, "status": "ok", "cwd": os.getcwd(),
+            "mark": os.environ.get("MBH_TEST_MARK"),
+            **{k: os.environ.get(k) for k in WORKER_ENV}}, None
 
 
 def toy_failure_row(spec: ToySpec, status: str, reason: str) -> dict:
@@ -82,6 +84,15 @@ def check_misbehaving_rows(rows: dict[str, dict]) -> None:
 @pytest.mark.parametrize("warm", [True, False], ids=["warm", "cold"])
 def test_local_pool_turns_every_failure_into_a_row(warm):
     check_misbehaving_rows(run_toys(MISBEHAVING, workers=2, warm=warm))
+
+
+def test_a_warm_worker_runs_in_the_callers_folder_and_environment_of_now(tmp_path, monkeypatch):
+    run_toys([ToySpec("ok-before")], workers=1)  # the template is running from here on
+    monkeypatch.setenv("MBH_TEST_MARK", "set after the template started")
+    monkeypatch.chdir(tmp_path)
+    row = run_toys([ToySpec("ok-after")], workers=1)["ok-after"]
+    assert row["mark"] == "set after the template started"
+    assert row["cwd"] == str(tmp_path) and row["OMP_NUM_THREADS"] == "1"
 
 
 CAMPAIGN_PROCESS = """
