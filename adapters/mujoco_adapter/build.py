@@ -37,8 +37,9 @@ from adapters.mujoco_adapter.loads import _loads, _Loads
 from harness.model.mechanism import GROUND, Joint, Mechanism, SpringDamper
 from harness.model.topology import SpanningTree, spanning_tree
 
-#: Smallest principal moment MuJoCo is given, relative to the body's largest (MuJoCo refuses a
-#: non-positive one; a slender bar has a zero moment about its own axis).
+#: Smallest principal moment MuJoCo is given, relative to the body's largest, or for a point mass
+#: (no moment at all) to its moment m r² about its farthest joint point (MuJoCo refuses a
+#: non-positive moment; a slender bar has a zero moment about its own axis).
 INERTIA_FLOOR = 1e-9
 _SLIDING = ("prismatic", "translational")
 _Z = np.array([0.0, 0.0, 1.0])
@@ -129,14 +130,17 @@ def _elementary_joints(joint: Joint, flipped: bool, parent_to_child: np.ndarray)
     return [("", mujoco.mjtJoint.mjJNT_BALL, _Z)]
 
 
-def floored_inertia(inertia: np.ndarray) -> tuple[np.ndarray, float]:
+def floored_inertia(inertia: np.ndarray, point_moment: float = 0.0) -> tuple[np.ndarray, float]:
     """``inertia`` with every principal moment raised to at least :data:`INERTIA_FLOOR` times
-    the largest, and the floor (kg·m²); unchanged when no moment is below it.
+    the largest (a point mass's, all zero: times ``point_moment``), and the floor (kg·m²);
+    unchanged when no moment is below it.
 
     Parameters
     ----------
     inertia : ndarray, shape (3, 3)
         Centroidal inertia tensor, kg·m².
+    point_moment : float
+        The body's moment m r² about its farthest joint point (:func:`point_moment`), kg·m².
 
     Returns
     -------
@@ -144,22 +148,32 @@ def floored_inertia(inertia: np.ndarray) -> tuple[np.ndarray, float]:
     floor : float
     """
     moments, axes = np.linalg.eigh(inertia)
-    floor = INERTIA_FLOOR * float(moments[-1])
+    floor = INERTIA_FLOOR * (float(moments[-1]) if moments[-1] > 0.0 else point_moment)
     if moments[0] >= floor:
         return inertia, floor
     return axes @ np.diag(np.maximum(moments, floor)) @ axes.T, floor
+
+
+def point_moment(mech: Mechanism, name: str) -> float:
+    """Moment m r² (kg·m²) of body ``name``'s mass about the farthest of its joint points."""
+    arms = [float(point @ point) for joint in mech.joints
+            for body, point in ((joint.body1, joint.point1), (joint.body2, joint.point2))
+            if body == name]
+    return mech.bodies[mech.body_index(name)].mass * max(arms, default=0.0)
 
 
 def _inertia_notes(mech: Mechanism) -> tuple[str, ...]:
     """One note per body whose inertia :func:`floored_inertia` raised."""
     notes = []
     for body in mech.bodies:
-        smallest = float(np.linalg.eigvalsh(body.inertia)[0])
-        raised, floor = floored_inertia(body.inertia)
+        moments = np.linalg.eigvalsh(body.inertia)
+        raised, floor = floored_inertia(body.inertia, point_moment(mech, body.name))
         if raised is not body.inertia:
-            notes.append(f"body {body.name}: principal moment {smallest:.3g} raised to {floor:.3g} "
-                         f"kg·m² ({INERTIA_FLOOR:g} × its largest) for MuJoCo, which requires "
-                         "positive inertia")
+            scale = ("its largest" if moments[-1] > 0.0
+                     else "m r² about its farthest joint point: a point mass")
+            notes.append(f"body {body.name}: principal moment {moments[0]:.3g} raised to "
+                         f"{floor:.3g} kg·m² ({INERTIA_FLOOR:g} × {scale}) for MuJoCo, which "
+                         "requires positive inertia")
     return tuple(notes)
 
 
@@ -167,7 +181,7 @@ def _add_body(spec_parent, mech: Mechanism, name: str, parent: str):
     """Add body ``name`` under ``spec_parent`` at its reference pose relative to ``parent``."""
     rot_p, pos_p = _pose(mech, parent)
     body = mech.bodies[mech.body_index(name)]
-    inertia, _ = floored_inertia(np.asarray(body.inertia, dtype=float))
+    inertia, _ = floored_inertia(np.asarray(body.inertia, dtype=float), point_moment(mech, name))
     added = spec_parent.add_body(name=name, pos=rot_p.T @ (body.position - pos_p),
                                  quat=_quat(rot_p.T @ body.rotation))
     added.mass = body.mass

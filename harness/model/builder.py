@@ -11,34 +11,65 @@ mechanisms never share a reference.
 
 The hash is of the values as given, like a file's: ``mass=1`` (an integer) and ``mass=1.0`` are
 different documents, as ``mass = 1`` and ``mass = 1.0`` are in TOML.  numpy arrays and scalars
-and tuples are turned into the lists and numbers a TOML file would hold.  The name is not part
+and tuples are turned into the lists and numbers a TOML file would hold; what no file can hold —
+a key that is not a string, an integer beyond 64 bits, containers nested deeper than
+:data:`MAX_DEPTH` (a list holding itself, say) — is a problem :meth:`MechanismBuilder.build`
+names like any other.  The name is not part
 of the document (a file's name is its stem), so ``MechanismBuilder("arm", ...)`` and ``arm.toml``
 hash alike.
 """
 
 from __future__ import annotations
 
-import copy
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
 from harness.model.mechanism import Mechanism
-from harness.model.scenario import from_document
+from harness.model.scenario import Problem, ScenarioError, _join, _key_text, from_document
+
+#: Deepest nesting of lists and tables a built document may have; a scenario's deepest field,
+#: ``initial.velocities[i].location``, is 4 deep.
+MAX_DEPTH = 32
+#: TOML integers are 64-bit signed.
+_INTEGER_BITS = 63
 
 
-def _plain(value: Any) -> Any:
+def _plain(value: Any, depth: int = 0) -> Any:
     """``value`` as a TOML parser would return it: lists for arrays and tuples, Python numbers
-    for numpy scalars, dicts and lists converted all the way down."""
+    for numpy scalars, dicts and lists converted (and so copied) all the way down to
+    :data:`MAX_DEPTH`; anything else as it is (the validator names what is wrong with it)."""
+    if depth > MAX_DEPTH:
+        return value
     if isinstance(value, np.ndarray):
-        return _plain(value.tolist())
+        return _plain(value.tolist(), depth)
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, (list, tuple)):
-        return [_plain(item) for item in value]
+        return [_plain(item, depth + 1) for item in value]
     if isinstance(value, dict):
-        return {key: _plain(item) for key, item in value.items()}
+        return {key: _plain(item, depth + 1) for key, item in value.items()}
     return value
+
+
+def _unrepresentable(value: Any, field: str, depth: int = 0) -> Iterator[tuple[str, str]]:
+    """(field, problem) for every part of a :func:`_plain` document no TOML file can hold."""
+    if depth > MAX_DEPTH:
+        yield field, f"nested deeper than {MAX_DEPTH} levels of lists and tables"
+    elif isinstance(value, int) and not isinstance(value, bool) \
+            and value.bit_length() > _INTEGER_BITS:
+        yield field, (f"an integer of {value.bit_length()} bits; a scenario holds 64-bit "
+                      f"integers (use a float)")
+    elif isinstance(value, list):
+        for index, item in enumerate(value):
+            yield from _unrepresentable(item, f"{field}[{index}]", depth + 1)
+    elif isinstance(value, dict):
+        for key, item in value.items():
+            if isinstance(key, str):
+                yield from _unrepresentable(item, _join(field, _key_text(key)), depth + 1)
+            else:
+                yield field or "-", (f"a key of type {type(key).__name__}; keys are strings, "
+                                     f"as in a scenario file")
 
 
 class MechanismBuilder:
@@ -72,9 +103,12 @@ class MechanismBuilder:
     def __init__(self, name: str, **fields: Any):
         self.name = name
         self._document: dict[str, Any] = _plain(fields)
+        #: Entries added by calls, per section (outputs as (name, table) pairs); merged into the
+        #: document by :meth:`document`, which names a section also given as a field.
+        self._added: dict[str, list] = {"bodies": [], "joints": [], "forces": [], "outputs": []}
 
-    def _append(self, section: str, table: dict) -> "MechanismBuilder":
-        self._document.setdefault(section, []).append(_plain(table))
+    def _append(self, section: str, entry) -> "MechanismBuilder":
+        self._added[section].append(_plain(entry))
         return self
 
     def body(self, name: str, **fields: Any) -> "MechanismBuilder":
@@ -99,17 +133,63 @@ class MechanismBuilder:
     def output(self, name: str, kind: str, **fields: Any) -> "MechanismBuilder":
         """Add output ``name`` of ``kind`` (joint_angle, position, point_velocity, ...) to the
         ``[outputs]`` table; the first output is the main one."""
-        self._document.setdefault("outputs", {})[name] = _plain({"kind": kind, **fields})
-        return self
+        return self._append("outputs", (name, {"kind": kind, **fields}))
 
     def reference(self, **fields: Any) -> "MechanismBuilder":
         """Set the ``[reference]`` table (``equal_joint_angles``, ``routes``)."""
         self._document["reference"] = _plain(fields)
         return self
 
+    @property
+    def source(self) -> str:
+        """How problems name the mechanism: ``<python: NAME>`` (a name that is not a string by
+        its type: its text may not even be printable, as for an integer of 5000 digits)."""
+        name = self.name if isinstance(self.name, str) else f"a {type(self.name).__name__}"
+        return f"<python: {name}>"
+
     def document(self) -> dict:
-        """A copy of the document as built so far (what a scenario file would parse to)."""
-        return copy.deepcopy(self._document)
+        """A copy of the document as built so far (what a scenario file would parse to).
+
+        Raises
+        ------
+        ScenarioError
+            When part of it is nothing a scenario file can hold (see the module docstring).
+        """
+        source = self.source
+        document, clashes = self._merged()
+        problems = [Problem(source, field, message) for field, message in
+                    [*clashes, *_unrepresentable(document, "")]]
+        if not isinstance(self.name, str):
+            problems.append(Problem(source, "name", f"expected a string, got "
+                                                    f"{type(self.name).__name__}"))
+        if problems:
+            raise ScenarioError(problems)
+        return _plain(document)
+
+    def _merged(self) -> tuple[dict, list[tuple[str, str]]]:
+        """The fields with the entries the calls added, and (field, problem) for each section
+        given both ways or output name given twice or not as a string."""
+        document, clashes = dict(self._document), []
+        for section, entries in self._added.items():
+            if not entries:
+                continue
+            if section in document:
+                clashes.append((section, f"given both as a field of MechanismBuilder() and by "
+                                         f"calls adding {section}; give it one way"))
+                continue
+            if section != "outputs":
+                document[section] = entries
+                continue
+            document[section] = {}
+            for name, table in entries:
+                if not isinstance(name, str):
+                    clashes.append((section, f"an output named by a {type(name).__name__}; "
+                                             f"output names are strings"))
+                elif name in document[section]:
+                    clashes.append((_join(section, _key_text(name)), "output added twice"))
+                else:
+                    document[section][name] = table
+        return document, clashes
 
     def build(self) -> Mechanism:
         """The validated mechanism.
@@ -119,4 +199,4 @@ class MechanismBuilder:
         ScenarioError
             With every problem found, each naming ``<python: NAME>`` and the field.
         """
-        return from_document(self.document(), self.name, f"<python: {self.name}>")
+        return from_document(self.document(), self.name, self.source)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 import tomllib
 import unicodedata
 from dataclasses import dataclass
@@ -41,6 +42,8 @@ from harness.model.mechanism import (
     SpringDamper,
 )
 from harness.model.families import FamilyError, family_document, family_names
+from harness.model import parts as shapes
+from harness.model.free_turns import ZERO_MOMENT as _ZERO_MOMENT, free_turn
 from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
 from harness.common.errors import MbhError
 from harness.common.locations import shipped
@@ -50,7 +53,21 @@ SCENARIO_DIR = shipped("scenarios")
 
 _TOP_KEYS = {"name", "kind", "plane", "duration", "sample_step", "gravity", "tags", "notes", "bodies", "joints",
              "forces", "initial", "outputs", "reference"}
-_BODY_KEYS = {"name", "mass", "inertia", "position", "angle_deg", "euler313_deg", "quaternion"}
+_BODY_KEYS = {"name", "mass", "inertia", "position", "angle_deg", "euler313_deg", "quaternion",
+              "parts"}
+#: What a body of parts does not take: the loader computes them from its parts.
+_COMPUTED_FROM_PARTS = ("mass", "inertia", "position")
+_ORIENTATION_KEYS = {"angle_deg", "euler313_deg", "quaternion"}
+#: The keys of each part type (docs/formats/scenario.md, "Parts").
+_PART_KEYS = {
+    "point": {"type", "mass", "position"},
+    "rod": {"type", "mass", "density", "position", "axis", "length"},
+    "box": {"type", "mass", "density", "position", "size"} | _ORIENTATION_KEYS,
+    "cylinder": {"type", "mass", "density", "position", "axis", "radius", "length"},
+    "sphere": {"type", "mass", "density", "position", "radius"},
+}
+#: Unit of each part type's density: per length for a rod, per volume for the solids.
+_DENSITY_UNIT = {"rod": "kg/m", "box": "kg/m³", "cylinder": "kg/m³", "sphere": "kg/m³"}
 _JOINT_KEYS = {"name", "type", "body1", "body2", "location", "location2", "axis", "axis2", "normal"}
 _FORCE_KEYS = {
     "joint_torque": {"type", "joint", "value"},
@@ -74,8 +91,6 @@ _AXIS_TOL = 1e-9
 #: up to three such numbers (m·v², I·ω², r × F), and 1e100³ stays below the double range (1.8e308).
 _LARGEST = 1e100
 _SMALLEST = 1e-100
-#: Relative size (of the trace) below which a principal moment counts as zero: a slender bar.
-_ZERO_MOMENT = 1e-12
 #: Unicode categories a name may not contain: control, format (e.g. right-to-left override,
 #: zero-width space), surrogate, private-use, unassigned, line and paragraph separators.
 _UNPRINTABLE = {"Cc", "Cf", "Cs", "Co", "Cn", "Zl", "Zp"}
@@ -101,6 +116,10 @@ class ScenarioError(MbhError, ValueError):
         super().__init__("\n".join(str(p) for p in problems))
 
 
+#: What :meth:`_Collector._given` returns for a required field that is missing.
+_MISSING = object()
+
+
 class _Collector:
     """Typed field readers that record a problem instead of raising."""
 
@@ -122,9 +141,19 @@ class _Collector:
             return None
         return table[key]
 
+    def _given(self, table: dict, key: str, path: str, default: Any) -> Any:
+        """``table[key]`` if present (a None from a Python caller included: the typed readers
+        name it), else ``default`` if not None, else :data:`_MISSING` with the problem added."""
+        if key in table:
+            return table[key]
+        if default is not None:
+            return default
+        self.add(_join(path, key), "missing required field")
+        return _MISSING
+
     def string(self, table: dict, key: str, path: str, default: str | None = None) -> str | None:
-        value = table.get(key, default) if default is not None else self.required(table, key, path)
-        if value is None:
+        value = self._given(table, key, path, default)
+        if value is _MISSING:
             return None
         if not isinstance(value, str) or not value:
             self.add(_join(path, key), f"expected a non-empty string, got {value!r}")
@@ -142,10 +171,10 @@ class _Collector:
 
     def number(self, table: dict, key: str, path: str, default: float | None = None,
                positive: bool = False, nonnegative: bool = False) -> float | None:
-        value = table.get(key, default) if default is not None else self.required(table, key, path)
-        if value is None:
+        value = self._given(table, key, path, default)
+        if value is _MISSING:
             return None
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        if not finite_number(value):
             self.add(_join(path, key), f"expected a finite number, got {value!r}")
             return None
         if abs(value) > _LARGEST:
@@ -175,6 +204,9 @@ class _Collector:
             sizes = " or ".join(str(n) for n in length)
             self.add(field, f"expected a list of {sizes} numbers, got {value!r}")
             return None
+        if not all(finite_number(v) for v in value):
+            self.add(field, f"contains a non-finite value: {value!r}")
+            return None
         array = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(array)):
             self.add(field, f"contains a non-finite value: {value!r}")
@@ -186,6 +218,42 @@ class _Collector:
             self.add(field, "zero-length vector")
             return None
         return array
+
+
+def finite_number(value: Any) -> bool:
+    """Whether ``value`` is a number (not a bool) that is finite as a double: TOML reads integers
+    of any size, and one beyond the double range (±1.8e308) cannot become a float."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    return abs(value) <= sys.float_info.max if isinstance(value, int) else math.isfinite(value)
+
+
+def read_toml(path: Path) -> tuple[str, dict]:
+    """The text of ``path`` and the TOML document it holds.
+
+    Raises
+    ------
+    FileNotFoundError
+        When there is no such file.
+    ValueError
+        When the file cannot be read or is not TOML; the message says why (``cannot read the
+        file: ...`` or ``not valid TOML: ...``; tomllib raises ValueError for an integer of over
+        4300 digits and RecursionError for arrays nested a few hundred deep).
+    """
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise
+    except UnicodeDecodeError as error:
+        raise ValueError(f"not valid TOML: {error}") from None
+    except (OSError, ValueError) as error:  # a folder, no permission, a NUL in the name
+        raise ValueError(f"cannot read the file: {error}") from None
+    try:
+        return text, tomllib.loads(text)
+    except ValueError as error:  # TOMLDecodeError, or an integer too long to convert
+        raise ValueError(f"not valid TOML: {error}") from None
+    except RecursionError:
+        raise ValueError("not valid TOML: arrays or tables nested too deeply to read") from None
 
 
 def name_problem(name: str) -> str | None:
@@ -240,9 +308,11 @@ def inertia_tensor(values: np.ndarray) -> np.ndarray:
 def inertia_problem(tensor: np.ndarray) -> str | None:
     """Why ``tensor`` is not a physical inertia tensor, or None.
 
-    Accepts a positive definite tensor obeying the triangle inequality, or a slender bar's: one
+    Accepts a positive definite tensor obeying the triangle inequality, a slender bar's: one
     principal moment zero (below ``_ZERO_MOMENT`` of the trace), the other two equal (the triangle
-    inequality with equality).  See the module docstring.
+    inequality with equality), or a point mass's: all three zero.  Whether the joints hold the
+    turns such a body has no inertia against is checked with the joints
+    (:mod:`harness.model.free_turns`).
     """
     principal = np.linalg.eigvalsh(tensor)
     total = principal.sum()
@@ -250,9 +320,11 @@ def inertia_problem(tensor: np.ndarray) -> str | None:
     listed = f"(principal moments {principal.tolist()})"
     if principal[0] < -zero:
         return f"has a negative principal moment {listed}"
+    if principal[2] <= zero:
+        return None  # a point mass
     if principal[1] <= zero:
-        return (f"has {'three' if principal[2] <= zero else 'two'} zero principal moments {listed}; "
-                "only a slender bar, with one zero moment about its axis, may have any")
+        return (f"has two zero principal moments {listed}; only a slender bar (one zero moment, "
+                "about its axis) or a point mass (all three zero) may have any")
     for moment in principal:
         if moment > total - moment + _ZERO_MOMENT * total:
             return ("breaks the triangle inequality: principal moment "
@@ -299,12 +371,12 @@ def load(name_or_path: str | Path) -> Mechanism:
         path = scenario_path(str(name_or_path))
     file = str(path)
     try:
-        document = tomllib.loads(path.read_text(encoding="utf-8"))
+        _, document = read_toml(path)
     except FileNotFoundError:
         known = ", ".join(scenario_names())
         raise ScenarioError([Problem(file, "-", f"no such scenario file (shipped: {known})")]) from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise ScenarioError([Problem(file, "-", f"not valid TOML: {error}")]) from None
+    except ValueError as error:
+        raise ScenarioError([Problem(file, "-", str(error))]) from None
     return from_document(document, path.stem, file)
 
 
@@ -336,6 +408,9 @@ def _load_family_member(name: str) -> Mechanism:
         document = family_document(family, parameter)
     except FamilyError as error:
         raise ScenarioError([Problem(file, "-", str(error))]) from None
+    except ValueError:  # int() refuses a parameter of over 4300 digits
+        raise ScenarioError([Problem(file, "-", f"family {family!r}: parameter of "
+                                                f"{len(parameter)} digits is out of range")]) from None
     return _Builder(file, name, document).build()
 
 
@@ -378,6 +453,7 @@ class _Builder:
 
         self._bodies()
         self._joints()
+        self._held_turns()
         forces = self._forces()
         initial = self._initial()
         outputs = self._outputs()
@@ -433,28 +509,165 @@ class _Builder:
 
     def _bodies(self) -> None:
         c = self.c
+        self.inertia_fields: dict[str, str] = {}
         for path, table in self._tables("bodies", required=True):
             c.unknown_keys(table, _BODY_KEYS, path)
             name = self._unique_name(table, path, self.bodies, reserved=(GROUND,))
-            mass = c.number(table, "mass", path, positive=True)
-            inertia_values = c.vector(table, "inertia", path, length=(3, 6))
-            inertia = None
-            if inertia_values is not None:
-                inertia = inertia_tensor(inertia_values)
-                problem = inertia_problem(inertia)
-                if problem:
-                    c.add(_join(path, "inertia"), problem)
-                    inertia = None
-            position = c.vector(table, "position", path)
             rotation = self._orientation(table, path)
-            if self.planar and position is not None and position[2] != 0.0:
-                c.add(_join(path, "position"), "a planar body must lie in z = 0")
+            if "parts" in table:
+                mass, inertia, position = self._body_of_parts(table, path, rotation)
+            else:
+                mass, inertia, position = self._body_given(table, path)
             if not _missing(name, mass, inertia, position, rotation):
                 self.bodies[name] = Body(name, mass, inertia, position, rotation)
+                self.inertia_fields[name] = _join(path, "parts" if "parts" in table else "inertia")
             elif name is not None:
                 self.bodies[name] = None  # known name, invalid body: keeps references quiet
 
-    def _orientation(self, table: dict, path: str) -> np.ndarray | None:
+    def _body_given(self, table: dict, path: str) -> tuple:
+        """(mass kg, centroidal inertia (3, 3) in the body frame, centre of mass (3,) m) as
+        written, each None where invalid."""
+        c = self.c
+        mass = c.number(table, "mass", path, positive=True)
+        inertia_values = c.vector(table, "inertia", path, length=(3, 6))
+        inertia = None
+        if inertia_values is not None:
+            inertia = inertia_tensor(inertia_values)
+            problem = inertia_problem(inertia)
+            if problem:
+                c.add(_join(path, "inertia"), problem)
+                inertia = None
+        position = c.vector(table, "position", path)
+        if self.planar and position is not None and position[2] != 0.0:
+            c.add(_join(path, "position"), "a planar body must lie in z = 0")
+        return mass, inertia, position
+
+    def _body_of_parts(self, table: dict, path: str, rotation: np.ndarray | None) -> tuple:
+        """(mass kg, centroidal inertia (3, 3) in the body frame of ``rotation``, centre of
+        mass (3,) m) of the body's ``parts`` (:mod:`harness.model.parts`), or Nones."""
+        c = self.c
+        for key in _COMPUTED_FROM_PARTS:
+            if key in table:
+                c.add(_join(path, key), "not with parts: the mass, centre of mass and inertia "
+                      "of a body of parts are computed from its parts")
+        field = _join(path, "parts")
+        entries = table["parts"]
+        if not isinstance(entries, list) or not entries \
+                or not all(isinstance(entry, dict) for entry in entries):
+            c.add(field, "expected a non-empty array of tables, one per part "
+                  "([[bodies.parts]] or a list of inline tables)")
+            return None, None, None
+        found = [self._part(entry, f"{field}[{index}]") for index, entry in enumerate(entries)]
+        if _missing(*found):
+            return None, None, None
+        whole = shapes.combined(found)
+        if not (np.all(np.isfinite(whole.inertia)) and np.abs(whole.inertia).max() <= _LARGEST
+                and whole.mass <= _LARGEST):
+            c.add(field, f"the parts' mass or inertia exceeds the limit {_LARGEST:g}")
+            return None, None, None
+        inertia = None if rotation is None else rotation.T @ whole.inertia @ rotation
+        return whole.mass, inertia, whole.centre
+
+    def _part(self, table: dict, path: str) -> shapes.MassProperties | None:
+        """One part: its type, placement and size, and its mass or density."""
+        c = self.c
+        kind = c.string(table, "type", path)
+        if kind is None:
+            return None
+        if kind not in _PART_KEYS:
+            c.add(_join(path, "type"), f"unknown part type {kind!r} "
+                  f"(known: {', '.join(_PART_KEYS)})")
+            return None
+        c.unknown_keys(table, _PART_KEYS[kind], path)
+        centre = self._planar_point(table, "position", path)
+        shape = getattr(self, f"_part_{kind}")(table, path)  # (measure, mass → part) or None
+        mass = self._part_mass(table, path, kind, None if shape is None else shape[0])
+        if _missing(centre, shape, mass):
+            return None
+        return shape[1](mass, centre)
+
+    def _part_mass(self, table: dict, path: str, kind: str, measure: float | None) -> float | None:
+        """The part's ``mass`` (kg), or ``density`` times its ``measure`` (length m or volume
+        m³); a point takes mass only."""
+        c = self.c
+        if "mass" in table and "density" in table:
+            c.add(path, "give mass or density, not both")
+            return None
+        if "mass" in table or kind == "point":  # a point's density is an unknown key
+            return c.number(table, "mass", path, positive=True)
+        if "density" not in table:
+            c.add(_join(path, "mass"), f"missing: give mass (kg) or density "
+                  f"({_DENSITY_UNIT[kind]})")
+            return None
+        density = c.number(table, "density", path, positive=True)
+        if density is None or measure is None:
+            return None
+        mass = density * measure
+        if not _SMALLEST <= mass <= _LARGEST:
+            c.add(_join(path, "density"), f"gives a mass of {mass:g} kg, outside "
+                  f"[{_SMALLEST:g}, {_LARGEST:g}]")
+            return None
+        return mass
+
+    # Each _part_<type> reads the type's size keys and returns (measure: length m or volume m³,
+    # a function of (mass kg, centre (3,) m) giving the part), or None with the problems added.
+    def _part_point(self, table, path):
+        return 0.0, shapes.point
+
+    def _part_rod(self, table, path):
+        length = self.c.number(table, "length", path, positive=True)
+        axis = self.c.vector(table, "axis", path, nonzero=True)
+        if _missing(length, axis):
+            return None
+        return length, lambda mass, centre: shapes.rod(mass, length, centre, axis)
+
+    def _part_box(self, table, path):
+        size = self.c.vector(table, "size", path)
+        if size is not None and not np.all(size > 0.0):
+            self.c.add(_join(path, "size"), f"edge lengths must be > 0, got {size.tolist()}")
+            size = None
+        rotation = self._orientation(table, path, "box")
+        if _missing(size, rotation):
+            return None
+        return (shapes.box_volume(size),
+                lambda mass, centre: shapes.box(mass, size, centre, rotation))
+
+    def _part_cylinder(self, table, path):
+        radius = self.c.number(table, "radius", path, positive=True)
+        length = self.c.number(table, "length", path, positive=True)
+        axis = self.c.vector(table, "axis", path, nonzero=True)
+        if _missing(radius, length, axis):
+            return None
+        return (shapes.cylinder_volume(radius, length),
+                lambda mass, centre: shapes.cylinder(mass, radius, length, centre, axis))
+
+    def _part_sphere(self, table, path):
+        radius = self.c.number(table, "radius", path, positive=True)
+        if radius is None:
+            return None
+        return (shapes.sphere_volume(radius),
+                lambda mass, centre: shapes.sphere(mass, radius, centre))
+
+    def _held_turns(self) -> None:
+        """Every body with zero principal moments must have the turns about those axes held by
+        its joints (:mod:`harness.model.free_turns`).  Skipped while a joint has problems: a
+        free turn would then only echo them."""
+        joints = [joint for joint in self.joints.values() if joint is not None]
+        tables = self.doc.get("joints")
+        if not isinstance(tables, list) or len(joints) != len(tables):
+            return
+        for name, body in self.bodies.items():
+            turn = None if body is None else free_turn(body, joints, self.planar)
+            if turn is not None:
+                self.c.add(self.inertia_fields[name], (
+                    f"body {name!r} has no inertia about the axis {np.round(turn, 12).tolist()} "
+                    f"through its centre of mass {body.position.tolist()} and its joints leave "
+                    "that turn free, so its motion is undetermined; tie it by a joint at a point "
+                    "away from the centre of mass (a revolute whose axis misses it; a spherical "
+                    "joint leaves the turn about the line to the joint free)"))
+
+    def _orientation(self, table: dict, path: str, what: str = "body") -> np.ndarray | None:
+        """The rotation (3, 3) a body or box is given by (``what`` names it in problems)."""
         c = self.c
         given = [k for k in ("angle_deg", "euler313_deg", "quaternion") if k in table]
         if len(given) > 1:
@@ -462,7 +675,7 @@ class _Builder:
             return None
         if self.planar:
             if given and given[0] != "angle_deg":
-                c.add(_join(path, given[0]), "a planar body takes angle_deg")
+                c.add(_join(path, given[0]), f"a planar {what} takes angle_deg")
                 return None
             angle = c.number(table, "angle_deg", path, default=0.0)
             return None if angle is None else Rotation.from_euler("z", angle, degrees=True).as_matrix()
@@ -474,7 +687,7 @@ class _Builder:
         if given[0] == "quaternion":
             quat = c.vector(table, "quaternion", path, length=(4,), nonzero=True)
             return None if quat is None else Rotation.from_quat(quat, scalar_first=True).as_matrix()
-        c.add(_join(path, "angle_deg"), "a spatial body takes euler313_deg or quaternion")
+        c.add(_join(path, "angle_deg"), f"a spatial {what} takes euler313_deg or quaternion")
         return None
 
     def _body_ref(self, table: dict, key: str, path: str) -> str | None:

@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from adapters.base import UnsupportedCase
 from adapters.mujoco_adapter import MujocoAdapter, export_mjcf
-from adapters.mujoco_adapter.build import floored_inertia
+from adapters.mujoco_adapter.build import floored_inertia, point_moment
 from adapters.mujoco_adapter.methods import INTEGRATORS
 from harness.neutral.start import initial_state
 from harness.model.mechanism import BodyTorque, JointActuation, SpringDamper
@@ -26,14 +26,14 @@ SCENARIOS = scenario_names()
 EXPECTED_CUTS = {"fourbar": ("B",), "fourbar_spatial": ("B",), "slider_crank": ("A",),
                  "slider_crank_planar": ("A",), "double_fourbar": ("A1", "A2"), "bricard": ("C",),
                  "andrews": ("E3", "E4", "E6"), "parallelogram_fourbar": ("A",),
-                 "stiff_fourbar": ("B",)}
+                 "stiff_fourbar": ("B",), "simple_pendulum": ()}
 #: ``connect`` equalities: one per cut, two (points on the axis) for a spatial revolute cut.
 EXPECTED_CONNECTS = {"bricard": 2}
 #: Redundant closure equations: a connect on a planar revolute cut has one; the two connects of
 #: Bricard's spatial revolute cut (6 equations for its 5) have one.
 EXPECTED_REDUNDANT = {"fourbar": 1, "fourbar_spatial": 0, "slider_crank": 0,
                       "slider_crank_planar": 1, "double_fourbar": 2, "bricard": 1, "andrews": 3,
-                      "parallelogram_fourbar": 1, "stiff_fourbar": 1}
+                      "parallelogram_fourbar": 1, "stiff_fourbar": 1, "simple_pendulum": 0}
 
 
 @pytest.fixture(scope="module", params=SCENARIOS)
@@ -162,10 +162,22 @@ def test_exact_inertias(case):
     for body, index in zip(mech.bodies, built.body_ids):
         frame = Rotation.from_quat(model.body_iquat[index], scalar_first=True).as_matrix()
         tensor = frame @ np.diag(model.body_inertia[index]) @ frame.T
-        # A slender body's zero moment is raised to INERTIA_FLOOR × its largest (noted).
-        expected, _ = floored_inertia(body.inertia)
-        np.testing.assert_allclose(tensor, expected, rtol=0, atol=1e-12 * body.inertia.max())
+        # A slender body's zero moment is raised to INERTIA_FLOOR × its largest, a point mass's
+        # to INERTIA_FLOOR × m r² about its farthest joint point (noted).
+        expected, _ = floored_inertia(body.inertia, point_moment(mech, body.name))
+        np.testing.assert_allclose(tensor, expected, rtol=0, atol=1e-12 * expected.max())
         np.testing.assert_array_equal(model.body_ipos[index], 0.0)
+
+
+def test_a_point_mass_gets_a_floor_of_its_moment_about_its_joint_and_a_note():
+    """The simple pendulum's 1 kg bob, 1 m from its pivot: 1e-9 × 1 kg·m² about every axis."""
+    built = ADAPTER.build(load("simple_pendulum"))
+    np.testing.assert_allclose(built.model.body_inertia[built.body_ids[0]], [1e-9] * 3,
+                               rtol=1e-12)
+    trajectory = ADAPTER.simulate(built, "best", 1e-3, 0.01, np.array([0.0, 0.01]))
+    assert [note for note in trajectory.notes if "a point mass" in note] == [
+        "body bob: principal moment 0 raised to 1e-09 kg·m² (1e-09 × m r² about its farthest "
+        "joint point: a point mass) for MuJoCo, which requires positive inertia"]
 
 
 def test_exact_gravity(case):
