@@ -29,7 +29,6 @@ Every key is optional; ``status`` defaults to ``"ok"``.  A file with a mistake r
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -39,6 +38,7 @@ from harness.run.spec import CaseSpec, main_output
 from harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
 from harness.measure.energy import energy_balance, energy_scale
 from harness.measure.metrics import lever_length, violation_series
+from harness.model.scenario import finite_number, read_toml
 from harness.model.trajectory import STATUSES
 
 #: Keys a tolerance entry may hold.
@@ -306,11 +306,11 @@ class Tolerances:
     def __init__(self, path):
         self.path = Path(path)
         try:
-            document = tomllib.loads(self.path.read_text(encoding="utf-8"))
+            _, document = read_toml(self.path)
         except FileNotFoundError:
             raise ToleranceError(f"{self.path}: no such tolerance file") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-            raise ToleranceError(f"{self.path}: not valid TOML: {error}") from None
+        except ValueError as error:
+            raise ToleranceError(f"{self.path}: {error}") from None
         self.entries: dict[tuple[str, str, str], dict] = {}
         for scene, adapters in document.items():
             for adapter, methods in self._table(adapters, scene).items():
@@ -327,8 +327,7 @@ class Tolerances:
         return value
 
     def _checked_number(self, value, where: str, least: float = 0.0) -> float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)) \
-                or not math.isfinite(value) or value < least:
+        if not finite_number(value) or value < least:
             self._fail(where, f"expected a finite number >= {least:g}, got {value!r}")
         return float(value)
 
