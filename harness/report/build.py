@@ -208,8 +208,9 @@ def _drawable(row, trajectory, report: Report) -> bool:
     """Whether ``trajectory`` has a time span to draw (else a note says why not)."""
     if len(trajectory.times) >= 2:
         return True
-    report.omit("histories", f"{row['scenario']}: {_label(row)} ended {row['status']} at "
-                             f"t = {float(trajectory.times[-1]):g} s with one stored sample; "
+    stored = (f"at t = {float(trajectory.times[-1]):g} s with one stored sample"
+              if len(trajectory.times) else "with no stored sample")
+    report.omit("histories", f"{row['scenario']}: {_label(row)} ended {row['status']} {stored}; "
                              f"there is nothing to draw over time ({row['reason']}).")
     return False
 
@@ -337,6 +338,8 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
         _draw_scenario(store, name, mine, accuracy, report)
     report.failure_scenes = failures.section_scenes(
         cases, sweeps, accuracy, manifest, lambda why: report.omit("failures", why))
+    for problem in store.problems:  # damaged files of the run (docs/formats/store.md)
+        report.omit("store", f"Damaged stored file, left out of this report: {problem}")
     return report
 
 

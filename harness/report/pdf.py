@@ -126,6 +126,7 @@ def _story(report, width: float) -> list:
                      f"scenario's main output."),
              _text(f"Built {report.built_at}", _NOTE),
              _text("Summary", h2),
+             *_omitted(report, "store"),
              _text("For each scenario and accuracy level: the fastest case with status ok whose "
                    "main-output error (largest |y − y_ref| on the evaluation grid, rad or m) is at "
                    "most the level.", _SMALL)]
