@@ -21,6 +21,12 @@ status (the classification is in :mod:`harness.model.trajectory`):
   ``"<ExceptionType>: message"``);
 * ``unsupported``: ``_start`` raised :class:`UnsupportedCase`.
 
+A stepper that breaks the contract — :meth:`Stepper._states` returns anything but
+:class:`~harness.model.trajectory.BodyStates` of arrays shaped (n_bodies, 3) and (n_bodies, 4) —
+ends the run ``failed`` with the shape it gave.  The reason of a run that a third-party adapter's
+own code ended (an exception, a broken contract) names the adapter, its package and the stage
+(:func:`blame`), so a campaign's row points at the package to fix.
+
 ``failure_time`` is the time of the last good state: the last state the method produced that
 passed the checks (the stepper's own per-step checks where it has them, :attr:`Stepper.t_good`,
 else the last state this loop read and checked).  Every sample before it is kept.  A failure
@@ -80,6 +86,40 @@ class RunFailure(Exception):
 def describe(error: BaseException) -> str:
     """``"<ExceptionType>: message"`` on one line (the reason of a run ended by an exception)."""
     return f"{type(error).__name__}: {' '.join(str(error).split())}"
+
+
+def adapter_label(name: str, package: str) -> str:
+    """``adapter 'toy' from package mbh-toy-adapter 0.1.0``, or ``adapter 'mujoco' (built-in)``
+    for an empty ``package`` (``"NAME VERSION"`` of the distribution providing the adapter)."""
+    return f"adapter {name!r} " + (f"from package {package}" if package else "(built-in)")
+
+
+def blame(source: str, stage: str, error: BaseException | str) -> str:
+    """The reason of a run that an adapter's own code ended in ``stage`` (``build``, ``_start``,
+    ``the run``): an exception (``describe(error)``) or a broken contract (a message).
+
+    With a ``source`` (:attr:`Adapter.source`: a third-party adapter) the reason names it:
+    ``"adapter 'toy' from package mbh-toy-adapter 0.1.0, in build: ZeroDivisionError: division
+    by zero"``; a built-in adapter's reason is the bare text.
+    """
+    text = describe(error) if isinstance(error, BaseException) else error
+    return f"{source}, in {stage}: {text}" if source else text
+
+
+#: The arrays of :class:`BodyStates` and the width of each, (n_bodies, width).
+_STATE_WIDTHS = {"position": 3, "quaternion": 4, "velocity": 3, "angular_velocity": 3}
+
+
+def malformed(states, n_bodies: int) -> str | None:
+    """How ``states`` breaks the contract of :meth:`Stepper._states` (a :class:`BodyStates`
+    whose arrays have shapes (n_bodies, 3) and, for the quaternion, (n_bodies, 4)), or None."""
+    if not isinstance(states, BodyStates):
+        return f"returned {type(states).__name__}, not BodyStates"
+    for name, width in _STATE_WIDTHS.items():
+        shape = np.shape(getattr(states, name))
+        if shape != (n_bodies, width):
+            return f"returned {name} of shape {shape}, expected {(n_bodies, width)}"
+    return None
 
 
 def _bad(name: str, value, rule: str) -> ValueError:
@@ -204,7 +244,12 @@ class Stepper(abc.ABC):
         the stepper tracks it (None: only the states the loop reads are known good).
     notes : list of str
         Facts a reader of the case must know.
+    source : str
+        Names a third-party adapter in the reason of a run its code ended (:func:`blame`); set
+        by :meth:`Adapter.simulate` from :attr:`Adapter.source`.
     """
+
+    source: str = ""
 
     def __init__(self):
         self.steps = 0
@@ -254,6 +299,9 @@ class Stepper(abc.ABC):
                 began = time.perf_counter()
                 current = self._states(float(t))
                 read_back += time.perf_counter() - began
+                broken = malformed(current, n_bodies)
+                if broken:
+                    raise _ContractBroken(f"_states({float(t):g}) {broken}")
                 bad = divergence_reason(current) or self.divergence(current)
                 if bad:
                     raise _CheckFailed(bad)
@@ -265,8 +313,12 @@ class Stepper(abc.ABC):
             status, reason, failure_time = "diverged", str(error), last_good
         except RunFailure as error:
             status, reason, failure_time = error.status, error.reason, self._last_good(last_good)
+        except _ContractBroken as error:
+            status, reason, failure_time = ("failed", blame(self.source, "the run", str(error)),
+                                            last_good)
         except Exception as error:  # noqa: BLE001 — a failure is a result (design rule 6)
-            status, reason, failure_time = "failed", describe(error), self._last_good(last_good)
+            status, reason, failure_time = ("failed", blame(self.source, "the run", error),
+                                            self._last_good(last_good))
         run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
                    read_back_s=read_back, steps=self.steps, counters=self.counters(),
                    notes=list(self.notes))
@@ -281,6 +333,10 @@ class Stepper(abc.ABC):
 
 class _CheckFailed(Exception):
     """A state read by the run loop failed the divergence check."""
+
+
+class _ContractBroken(Exception):
+    """A stepper returned states that are not body states of the mechanism (:func:`malformed`)."""
 
 
 @dataclass(frozen=True)
@@ -339,9 +395,26 @@ def parse_method(text: str) -> tuple[str, dict]:
 
 
 class Adapter(abc.ABC):
-    """Base class of every engine adapter (registered by name in :mod:`adapters`)."""
+    """Base class of every engine adapter (registered by name in :mod:`adapters`).
+
+    Attributes
+    ----------
+    name : str
+        Registry name; :func:`adapters.get_adapter` sets it to the name the adapter is
+        registered under.
+    package : str
+        ``"NAME VERSION"`` of the distribution providing a third-party adapter, set by
+        :func:`adapters.get_adapter` from its entry point; ``""`` for a built-in adapter.
+    """
 
     name: str = ""
+    package: str = ""
+
+    @property
+    def source(self) -> str:
+        """Names a third-party adapter and its package in failure reasons (:func:`blame`):
+        ``adapter 'toy' from package mbh-toy-adapter 0.1.0``; ``""`` for a built-in adapter."""
+        return adapter_label(self.name, self.package) if self.package else ""
 
     @abc.abstractmethod
     def version(self) -> str:
@@ -432,8 +505,9 @@ class Adapter(abc.ABC):
         except UnsupportedCase as error:
             return Trajectory.empty(n_bodies, status="unsupported", reason=str(error))
         except Exception as error:  # noqa: BLE001 — a refused start is a result (rule 6)
-            return Trajectory.empty(n_bodies, status="failed", reason=describe(error),
-                                    failure_time=0.0)
+            return Trajectory.empty(n_bodies, status="failed",
+                                    reason=blame(self.source, "_start", error), failure_time=0.0)
+        stepper.source = self.source
         try:
             return stepper.run(grid, n_bodies)
         finally:

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import pandas as pd
 
-from adapters.base import Adapter, UnsupportedCase
+from adapters.base import Adapter, UnsupportedCase, blame
 from harness.common.capture import captured_output, engine_note
 from harness.neutral.conditioning import label_failure
 from harness.measure.metrics import case_metrics
@@ -62,19 +62,40 @@ def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
                   t_end: float) -> Trajectory:
     """The adapter's own run, with what its library printed kept in the notes.
 
-    A mechanism the engine cannot build gives an ``unsupported`` trajectory.  Raises ValueError
-    for a step or end time that does not fit the sample grid or the adapter (user input).
+    A mechanism the engine cannot build gives an ``unsupported`` trajectory; one whose build
+    raises anything else, a ``failed`` one whose reason names a third-party adapter and its
+    package (:func:`adapters.base.blame`).  Raises ValueError for a step or end time that does not
+    fit the sample grid or the adapter (user input).
     """
     times = sample_times(dt, t_end, mech.sample_step)
     with captured_output() as printed:
         try:
-            trajectory = adapter.simulate(adapter.build(mech), method, dt, t_end, times)
+            trajectory = adapter.simulate(_built(adapter, mech), method, dt, t_end, times)
         except UnsupportedCase as error:
             trajectory = Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
+        except _BuildBroke as error:
+            trajectory = Trajectory.empty(len(mech.bodies), status="failed", reason=str(error),
+                                          failure_time=0.0)
     note = engine_note(printed.text)
     if note:
         trajectory.notes = [*trajectory.notes, note]
     return trajectory
+
+
+class _BuildBroke(Exception):
+    """An adapter's ``build`` raised something other than UnsupportedCase; the message is the
+    case's reason."""
+
+
+def _built(adapter: Adapter, mech: Mechanism):
+    """``adapter.build(mech)``; any exception but UnsupportedCase becomes :class:`_BuildBroke`
+    (a third-party adapter and its package named, :func:`adapters.base.blame`)."""
+    try:
+        return adapter.build(mech)
+    except UnsupportedCase:
+        raise
+    except Exception as error:  # noqa: BLE001 — a build that breaks is a result (rule 6)
+        raise _BuildBroke(blame(adapter.source, "build", error)) from error
 
 
 def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: float,

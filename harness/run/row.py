@@ -27,8 +27,8 @@ import statistics
 import numpy as np
 import scipy
 
-from adapters import get_adapter
-from adapters.base import Adapter, UnsupportedCase, describe
+from adapters import AdapterLoadError, get_adapter
+from adapters.base import Adapter, UnsupportedCase, blame, describe
 from harness.model import scenario
 from harness.run.spec import CaseSpec, main_output
 from harness.run.case import CaseResult, run_case, simulate_case
@@ -52,9 +52,12 @@ def calibration_spec() -> CaseSpec:
 
 
 def packages(adapter: Adapter) -> str:
-    """JSON of the versions that produced a row: numpy, scipy and the engine."""
-    return json.dumps({"numpy": np.__version__, "scipy": scipy.__version__,
-                       "engine": adapter.version()}, sort_keys=True)
+    """JSON of the versions that produced a row: numpy, scipy, the engine and, for a third-party
+    adapter, the package providing it (``adapter_package``: ``"NAME VERSION"``)."""
+    versions = {"numpy": np.__version__, "scipy": scipy.__version__, "engine": adapter.version()}
+    if adapter.package:
+        versions["adapter_package"] = adapter.package
+    return json.dumps(versions, sort_keys=True)
 
 
 def _load_reference(mech: Mechanism) -> tuple[Trajectory | None, str]:
@@ -70,12 +73,18 @@ def _model_size(adapter: Adapter, mech: Mechanism) -> dict:
     try:
         size = adapter.model_size(adapter.build(mech))
     except UnsupportedCase as error:
-        size = {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
-                "notes": f"not built: {error}"}
+        size = _no_size(f"not built: {error}")
+    except Exception as error:  # noqa: BLE001 — the run's row already says why (rule 6)
+        size = _no_size(f"not built: {blame(adapter.source, 'build or model_size', error)}")
     return {"n_coordinates": size["coordinates"],
             "n_constraint_equations": size["constraint_equations"],
             "n_redundant_equations": size["redundant_equations"],
             "model_notes": size["notes"]}
+
+
+def _no_size(notes: str) -> dict:
+    return {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
+            "notes": notes}
 
 
 def _spec_columns(spec: CaseSpec) -> dict:
@@ -129,31 +138,37 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
     -------
     CaseResult
         With ``row`` set (see the module docstring).  Never raises for engine trouble: that is
-        the row's status.  An exception raised outside the engine's run (building the model,
-        measuring it) gives status ``failed`` with the exception as the reason (and empty
-        ``metrics``).
+        the row's status.  An adapter that cannot be loaded
+        (:class:`adapters.AdapterLoadError`), and an exception raised outside the engine's run
+        (the adapter's ``version()``, measuring the run), give status ``failed`` with the error as
+        the reason (and empty ``metrics``); a third-party adapter's reason names it and its
+        package.
     """
     mech = scenario.load(spec.scenario) if mech is None else mech
-    adapter = get_adapter(spec.adapter)
     reference, reference_column = _load_reference(mech)
+    try:
+        adapter = get_adapter(spec.adapter)
+    except AdapterLoadError as error:
+        return _failed(spec, mech, str(error), reference_column)
+    try:
+        version = adapter.version()
+    except Exception as error:  # noqa: BLE001 — the adapter's own code: named in the reason
+        return _failed(spec, mech, blame(adapter.source, "version()", error), reference_column)
     try:
         result = run_case(adapter, mech, spec.method, spec.dt, spec.t_end, reference, bounds)
         walls = [result.trajectory.wall_time_s]
         for _ in range(spec.repetitions - 1):
             walls.append(simulate_case(adapter, mech, spec.method, spec.dt, spec.t_end).wall_time_s)
         size = _model_size(adapter, mech)
-    except Exception as error:  # noqa: BLE001 — a failure to build or measure is a result
-        row = error_row(spec, "failed", describe(error))
-        row["reference"] = reference_column
-        return CaseResult(Trajectory.empty(len(mech.bodies), status="failed",
-                                           reason=row["reason"], failure_time=0.0), {}, row)
+    except Exception as error:  # noqa: BLE001 — a failure to measure is a result
+        return _failed(spec, mech, describe(error), reference_column)
     trajectory, metrics = result.trajectory, result.metrics
     main = main_output(mech)
     error = metrics.get("output_errors", {}).get(main, float("nan"))
     wall = statistics.median(walls)
     row = {
         **_spec_columns(spec),
-        "scenario_hash": mech.content_hash, "adapter_version": adapter.version(),
+        "scenario_hash": mech.content_hash, "adapter_version": version,
         **_metric_columns(metrics, mech),
         "accurate": None if reference is None else bool(
             trajectory.status == "ok" and error <= accuracy),
@@ -165,6 +180,13 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
         "reference": reference_column, "packages": packages(adapter),
     }
     return CaseResult(trajectory, metrics, row)
+
+
+def _failed(spec: CaseSpec, mech: Mechanism, reason: str, reference_column: str) -> CaseResult:
+    """A ``failed`` case without samples or metrics, its row saying ``reason``."""
+    row = error_row(spec, "failed", reason) | {"reference": reference_column}
+    return CaseResult(Trajectory.empty(len(mech.bodies), status="failed", reason=reason,
+                                       failure_time=0.0), {}, row)
 
 
 def error_row(spec: CaseSpec, status: str, reason: str) -> dict:

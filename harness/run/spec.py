@@ -14,17 +14,16 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from adapters import adapter_names, get_adapter
+from adapters import AdapterLoadError, adapter_names, get_adapter
 from adapters.base import GRID_RTOL, Adapter
 from harness.model import scenario
 from harness.model.mechanism import Mechanism
 from harness.model.timegrid import steps_per_sample
-from harness.model.scenario import Problem, _Collector, _join
+from harness.model.scenario import Problem, _Collector, _join, finite_number, read_toml
 from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
 from harness.common.errors import MbhError
 from harness.common.locations import shipped
@@ -182,15 +181,23 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
     path = campaign_path(name_or_path)
     file = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
-        document = tomllib.loads(text)
+        text, document = read_toml(path)
     except FileNotFoundError:
         known = ", ".join(campaign_names())
         raise CampaignError([Problem(file, "-", f"no such campaign file (shipped: {known})")]) \
             from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-        raise CampaignError([Problem(file, "-", f"not valid TOML: {error}")]) from None
+    except ValueError as error:
+        raise CampaignError([Problem(file, "-", str(error))]) from None
     return _Reader(file, document, path.resolve().parent).read(path, text)
+
+
+class _Unloadable:
+    """Stands in for a registered adapter that cannot be loaded: its method strings are taken
+    unchecked, and its cases run and fail with the load error, naming the adapter and its
+    package, as their reason (docs/design.md, rule 6: a row, never a refused campaign)."""
+
+    def method_spec(self, method: str) -> None:
+        """Accepts every method string."""
 
 
 class _Reader:
@@ -201,7 +208,7 @@ class _Reader:
         self.document = document
         self.folder = folder
         self._mechanisms: dict[str, Mechanism | None] = {}
-        self._adapters: dict[str, Adapter | None] = {}
+        self._adapters: dict[str, Adapter | _Unloadable] = {}
         self._methods_checked: set[tuple[str, str]] = set()
 
     def read(self, path: Path, text: str) -> Campaign:
@@ -274,7 +281,10 @@ class _Reader:
         becomes its absolute path, so a user's campaign and scenes live side by side in the
         user's repository; names (shipped scenes, family members) stay as written."""
         if isinstance(written, str) and written.endswith(".toml"):
-            return str((self.folder / written).resolve())
+            try:
+                return str((self.folder / written).resolve())
+            except (OSError, ValueError, RuntimeError):  # a NUL in the name, a symlink loop
+                return written  # the scenario loader names the problem
         return written
 
     def _mechanism(self, name: Any, field: str) -> Mechanism | None:
@@ -295,16 +305,18 @@ class _Reader:
                 return None
         return self._mechanisms[name]
 
-    def _adapter(self, name: Any, field: str) -> Adapter | None:
-        if not isinstance(name, str) or name not in adapter_names():
-            self.c.add(field, f"unknown adapter {name!r} (known: {', '.join(adapter_names())})")
+    def _adapter(self, name: Any, field: str) -> Adapter | _Unloadable | None:
+        """The registered adapter ``name`` (an :class:`_Unloadable` when it cannot be loaded);
+        None, with the problem recorded, for a name that is not registered."""
+        known = adapter_names()
+        if not isinstance(name, str) or name not in known:
+            self.c.add(field, f"unknown adapter {name!r} (known: {', '.join(known)})")
             return None
         if name not in self._adapters:
             try:
                 self._adapters[name] = get_adapter(name)
-            except ImportError as error:
-                self.c.add(field, f"adapter {name!r} cannot be imported: {error}")
-                self._adapters[name] = None
+            except AdapterLoadError:
+                self._adapters[name] = _Unloadable()
         return self._adapters[name]
 
     def _names(self, table: dict, key: str, path: str, everything: list[str]) -> list[str]:
@@ -373,7 +385,7 @@ class _Reader:
                 result[name] = valid
         return result
 
-    def _method_strings(self, adapter: Adapter | None, name: str, strings: Any,
+    def _method_strings(self, adapter: Adapter | _Unloadable | None, name: str, strings: Any,
                         field: str) -> list[str]:
         if not isinstance(strings, list) or not strings:
             self.c.add(field, f"expected a non-empty list of method strings, got {strings!r}")
@@ -411,8 +423,7 @@ class _Reader:
         return steps
 
     def _step(self, dt: Any, field: str) -> float | None:
-        if isinstance(dt, bool) or not isinstance(dt, (int, float)) or not math.isfinite(dt) \
-                or dt <= 0:
+        if not finite_number(dt) or dt <= 0:
             self.c.add(field, f"expected a finite step > 0 (s), got {dt!r}")
             return None
         try:
@@ -464,6 +475,10 @@ class _Reader:
                    mech.duration)
 
     def _divides(self, dt: float, duration: float, field: str, name: str) -> bool:
+        if not math.isfinite(duration / dt):  # a step near the double's smallest
+            self.c.add(field, f"step {dt!r} s is too small: the duration {duration!r} s of "
+                       f"scenario {name!r} holds more steps than a double counts")
+            return False
         count = round(duration / dt)
         if count >= 1 and abs(duration - count * dt) <= GRID_RTOL * max(duration, dt):
             return True

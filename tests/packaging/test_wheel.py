@@ -1,6 +1,6 @@
 """The harness as a user meets it: the wheel installed into a fresh virtual environment outside the
-checkout, used from a folder of the user's (slow: the environment takes minutes to install, and
-the in-house kernels compile cold there).
+checkout (tests/packaging/conftest.py), used from a folder of the user's (slow: the environment
+takes minutes to install, and the in-house kernels compile cold there).
 
 Checked: the wheel carries the scenarios, campaigns and references (``mbh simulate fourbar`` is
 ``ok`` with a verified reference); a user's own scene builds its reference into the user cache,
@@ -11,15 +11,13 @@ never into the installed package; ``mbh run smoke`` and ``mbh report`` work with
 from __future__ import annotations
 
 import json
-import os
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
 from tests.helpers import ROOT, example_suite_files
+from tests.packaging.conftest import run
 
 pytestmark = pytest.mark.slow
 
@@ -50,33 +48,6 @@ rate = 0.0
 [outputs]
 angle = { kind = "joint_angle", joint = "pivot" }
 '''
-
-
-def run(command: list, cwd: Path, env: dict, timeout: float = 1800) -> subprocess.CompletedProcess:
-    done = subprocess.run([str(c) for c in command], cwd=cwd, env=env, capture_output=True,
-                          text=True, timeout=timeout, check=False)
-    assert done.returncode == 0, f"{command}: exit {done.returncode}\n{done.stdout}\n{done.stderr}"
-    return done
-
-
-@pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """(venv bin folder, user folder, environment) with the wheel installed from the checkout."""
-    base = tmp_path_factory.mktemp("wheel")
-    env = {key: value for key, value in os.environ.items()
-           if not key.startswith(("MBH_", "PYTHON", "VIRTUAL_ENV", "NUMBA_CACHE"))}
-    run([sys.executable, "-m", "pip", "wheel", ROOT, "--no-deps", "-q", "-w", base / "dist"],
-        base, env)
-    wheel, = (base / "dist").glob("mbh-*.whl")
-    run([sys.executable, "-m", "venv", base / "venv"], base, env)
-    bin_folder = base / "venv" / "bin"
-    run([bin_folder / "python", "-m", "pip", "install", "-q", "-c", ROOT / "constraints.txt",
-         wheel, "pytest"], base, env)
-    user = base / "user"
-    user.mkdir()
-    env |= {"XDG_CACHE_HOME": str(base / "cache"), "XDG_DATA_HOME": str(base / "data"),
-            "PATH": f"{bin_folder}{os.pathsep}{env.get('PATH', '')}"}
-    return bin_folder, user, env
 
 
 def test_the_installed_package_is_not_the_checkout(installed):
