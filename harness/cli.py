@@ -139,8 +139,24 @@ def _adapter(name: str):
 
     try:
         return get_adapter(name)
-    except ValueError as error:
+    except (ValueError, ImportError) as error:  # unknown, or cannot be loaded
         raise UserError(str(error)) from None
+
+
+def cmd_adapters(args) -> int:
+    """The registered adapters (built-in and from the ``mbh.adapters`` entry points): origin,
+    package version, engine version and method count; a row's ``problem`` says why an adapter
+    cannot be used (and exit 1)."""
+    from adapters import inventory
+
+    rows = inventory()
+    if args.json:
+        _print_json(rows)
+    else:
+        _print_table([{key: "" if value is None else value for key, value in row.items()}
+                      for row in rows], ["name", "origin", "package_version", "version", "methods",
+                                         "problem"])
+    return 1 if any(row["problem"] for row in rows) else 0
 
 
 def _bounds(text: str | None) -> Bounds:
@@ -284,6 +300,7 @@ def cmd_run(args) -> int:
     """Run a campaign into the result store (see :mod:`harness.run.campaign`)."""
     from harness.run.spec import CampaignError, load_campaign
     from harness.run.campaign import CampaignInterrupted, RunnerError, run_campaign
+    from harness.store.runs import StoreError
 
     try:
         campaign = load_campaign(args.campaign)
@@ -293,7 +310,7 @@ def cmd_run(args) -> int:
         store = run_campaign(campaign, workers=args.workers, scheduler=args.scheduler,
                              resume=args.resume, reuse=args.reuse, root=_results_root(args),
                              quiet=args.quiet, warm_workers=not args.cold_workers)
-    except RunnerError as error:
+    except (RunnerError, StoreError) as error:  # StoreError: a read-only or full results root
         raise UserError(str(error)) from None
     except CampaignInterrupted as stop:  # before KeyboardInterrupt: it is one
         cases = stop.store.cases()
@@ -311,7 +328,7 @@ def cmd_run(args) -> int:
     return 0
 
 
-BENCH_PARTS = ("front", "overhead", "scaling", "references")
+BENCH_PARTS = ("front", "overhead", "fallback", "scaling", "references")
 
 
 def cmd_bench(args) -> int:
@@ -334,6 +351,12 @@ def cmd_bench(args) -> int:
                       for r in rows], ["adapter", "scenario", "method", "adapter_us_per_step",
                                        "bare_us_per_step", "ratio", "read_back_us_per_sample",
                                        "note"])
+    if "fallback" in parts:
+        print(f"\nright-hand sides the generated loop handed back to the kernels "
+              f"({bench.FALLBACK_METHOD}, dt 1e-4 s, up to 1 s)")
+        _print_table([{**r, "fraction": format_number(r["fraction"])}
+                      for r in bench.fallback_rows()],
+                     ["scenario", "status", "kernel_calls", "rhs_evals", "fraction", "note"])
     if "scaling" in parts:
         members = tuple(n for n in bench.SCALING_N if n <= args.scaling_max)
         print("\ncost per simulated second on n_fourbar@N (best, dt 1e-3 s, 0.5 s), s/s")
@@ -364,7 +387,7 @@ def _bench_front(args) -> None:
                          quiet=True)
     cases = store.cases()
     print(f"fronts from run {store.run_id} ({len(cases)} cases, {_status_counts(cases)})")
-    for name in ("fourbar", "slider_crank"):
+    for name in sorted(cases["scenario"].unique()):
         table = front_ratio_table(cases, name)
         print(f"\n{table.caption}")
         rows = [dict(zip(table.columns, (format_number(v) if isinstance(v, float) else v
@@ -389,7 +412,14 @@ def cmd_runs(args) -> int:
         _print_table(rows, ["run_id", "campaign", "status", "started", "ended", "n_cases"])
     else:
         print("no runs")
+    _warn_problems(problem for m in manifests for problem in m.get("problems", []))
     return 0
+
+
+def _warn_problems(problems) -> None:
+    """Each damaged stored file on stderr (docs/formats/store.md, "Damaged files")."""
+    for problem in problems:
+        print(f"mbh: warning: {problem}", file=sys.stderr)
 
 
 #: Columns of ``mbh show`` without --json (the JSON form has them all).
@@ -406,6 +436,7 @@ def cmd_show(args) -> int:
             raise UserError(f"--where {args.where!r}: {type(error).__name__}: {error}; give a "
                             f"pandas DataFrame.query expression over the columns "
                             f"{', '.join(store.cases().columns)}") from None
+    _warn_problems(store.problems)
     if args.json:
         _print_json(_records(cases))
         return 0
@@ -450,16 +481,43 @@ def cmd_report(args) -> int:
     return 0
 
 
+def cmd_history(args) -> int:
+    """Build a campaign's history page from its stored runs (see
+    :mod:`harness.report.history_page`); print its path, or with --json the runs and changes."""
+    from harness.report.history import HistoryError, find_changes, load_history
+    from harness.report.history_page import build_history
+
+    try:
+        history = load_history(args.campaign, _results_root(args))
+    except HistoryError as error:
+        raise UserError(str(error)) from None
+    changes = find_changes(history)
+    page = build_history(history.campaign, _results_root(args), args.out, history=history,
+                         changes=changes)
+    if args.json:
+        _print_json({"campaign": history.campaign, "page": str(page),
+                     "runs": _records(history.runs.drop(columns="packages")),
+                     "changes": _records(changes)})
+        return 0
+    print(f"{len(history.runs)} runs of {history.campaign}: "
+          + (", ".join(f"{kind} {count}" for kind, count in
+                       changes["kind"].value_counts().sort_index().items()) or "no change"))
+    print(page)
+    return 0
+
+
 def cmd_nightly(args) -> int:
-    """Run a campaign, compare it with its previous run, report, and gate on regressions (see
-    :mod:`harness.jobs.nightly`); prints the Markdown summary; exit 1 on a regression."""
+    """Run a campaign, search its history and compare it with its previous run, report, and gate
+    on regressions (see :mod:`harness.jobs.nightly`); prints the Markdown summary; exit 1 on a
+    regression."""
     from harness.run.spec import CampaignError
     from harness.jobs.nightly import nightly
     from harness.run.campaign import CampaignInterrupted, RunnerError
 
     try:
         outcome = nightly(args.campaign, root=_results_root(args), workers=args.workers,
-                          error_factor=args.error_factor, time_factor=args.time_factor,
+                          gate=args.gate, error_factor=args.error_factor,
+                          time_factor=args.time_factor,
                           summary_path=args.summary,
                           formats=() if args.no_report else ("html", "pdf"), quiet=args.quiet)
     except (CampaignError, RunnerError, ValueError) as error:
@@ -486,6 +544,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--all", action="store_true")
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_check)
+
+    p = sub.add_parser("adapters", help="list the adapters, built-in and installed (entry "
+                       "points mbh.adapters), with their origin and versions")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.set_defaults(func=cmd_adapters)
 
     p = sub.add_parser("methods", help="list an adapter's methods with their parameters")
     p.add_argument("--adapter", default="inhouse")
@@ -539,7 +602,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_run)
 
     p = sub.add_parser("bench", help="speed: in-house front vs the best engine, adapter "
-                                     "overheads, scaling on n_fourbar@N, reference build times")
+                                     "overheads, generated-loop fallbacks, scaling on "
+                                     "n_fourbar@N, reference build times")
     p.add_argument("--parts", default=",".join(BENCH_PARTS),
                    help=f"comma-separated subset of {', '.join(BENCH_PARTS)} (default: all)")
     p.add_argument("--workers", type=_positive_int, default=None,
@@ -580,20 +644,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--root", default=None, help=root_help)
     p.set_defaults(func=cmd_report)
 
-    from harness.jobs.nightly import DEFAULT_CAMPAIGN, ERROR_FACTOR, TIME_FACTOR
+    p = sub.add_parser("history", help="a campaign's history over its stored runs: steps in "
+                       "each case's status, errors and calibrated time, as an HTML page")
+    p.add_argument("--campaign", default=None,
+                   help="campaign name (default: the campaign of the latest finished run)")
+    p.add_argument("--root", default=None, help=root_help)
+    p.add_argument("--out", default=None,
+                   help="output folder (default: reports/history-CAMPAIGN/)")
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.set_defaults(func=cmd_history)
 
-    p = sub.add_parser("nightly", help="run a campaign, compare it with its previous run, build "
-                       "its report; exit 1 on a regression")
+    from harness.jobs.nightly import (DEFAULT_CAMPAIGN, DEFAULT_GATE, ERROR_FACTOR, GATES,
+                                      TIME_FACTOR)
+
+    p = sub.add_parser("nightly", help="run a campaign, gate on the steps of its history (or on "
+                       "its previous run), build its report and history page; exit 1 on a "
+                       "regression")
     p.add_argument("--campaign", default=DEFAULT_CAMPAIGN,
                    help=f"campaign name or file (default: {DEFAULT_CAMPAIGN})")
     p.add_argument("--root", default=None, help=root_help)
     p.add_argument("--workers", type=_positive_int, default=None,
                    help="local worker processes (default and maximum: the cores)")
+    p.add_argument("--gate", choices=GATES, default=DEFAULT_GATE,
+                   help="history: fail on a new open step for the worse in the campaign's "
+                        "history; previous: fail on a change against the previous run "
+                        "(default %(default)s)")
     p.add_argument("--error-factor", type=float, default=ERROR_FACTOR,
-                   help="regression: main-output error more than this many times the previous "
-                        "run's (default %(default)g)")
+                   help="--gate previous: main-output error more than this many times the "
+                        "previous run's (default %(default)g)")
     p.add_argument("--time-factor", type=float, default=TIME_FACTOR,
-                   help="regression: calibrated wall time more than this many times the "
+                   help="--gate previous: calibrated wall time more than this many times the "
                         "previous run's (default %(default)g)")
     p.add_argument("--summary", default=None, metavar="PATH",
                    help="Markdown summary file (default: <run folder>/nightly_summary.md)")

@@ -1,5 +1,5 @@
-"""``mbh nightly``: run a campaign, compare it with the previous run of the same campaign, build
-its reports and gate on regressions.
+"""``mbh nightly``: run a campaign, gate on the steps in its history (or on the previous run),
+build its reports and the history page, and summarise.
 
 Steps of :func:`nightly`:
 
@@ -7,24 +7,40 @@ Steps of :func:`nightly`:
    root, looked up before this run starts;
 2. the campaign runs into the store (:func:`harness.run.campaign.run_campaign`, calibration case
    included);
-3. the two runs are compared case by case (:func:`harness.store.compare.compare_runs`: errors as ratios,
-   wall times as ratios of calibrated times, i.e. each divided by its own run's calibration case);
-4. the reports are built into ``<run folder>/report/`` when :mod:`harness.report.build` is
-   installed (otherwise the step is skipped with a note);
-5. a short summary, printed and written as Markdown (``<run folder>/nightly_summary.md`` unless
-   given, and appended to ``$GITHUB_STEP_SUMMARY`` when that is set).
+3. the two runs are compared case by case (:func:`harness.store.compare.compare_runs`: errors as
+   ratios, wall times as ratios of calibrated times, i.e. each divided by its own run's
+   calibration case);
+4. the campaign's history (every finished run of it, this one included) is searched for steps
+   (:func:`harness.report.history.find_changes`);
+5. the reports are built into ``<run folder>/report/``: the run's report (``report.html``,
+   ``report.pdf``) when :mod:`harness.report.build` is installed, and the history page
+   (``history.html``) linking to every run's report (otherwise the step is skipped with a note);
+6. the gate's record ``<run folder>/nightly_gate.json`` (the regressions open after this run)
+   and a short summary, printed and written as Markdown (``<run folder>/nightly_summary.md``
+   unless given, and appended to ``$GITHUB_STEP_SUMMARY`` when that is set).
 
-A regression is a case present in both runs that is :data:`REGRESSIONS`: newly failing (``ok``
-before, not ``ok`` now: failed, diverged, crashed, timeout, unsupported), less accurate (main
-output error more than ``error_factor`` times the previous one) or slower (calibrated time more
-than ``time_factor`` times the previous one).  The thresholds are command-line options: the
-campaign file format (:mod:`harness.run.spec`) accepts no other keys.  Exit status
-(:attr:`NightlyOutcome.exit_code`): 0 no regression, 1 at least one regression, 3 no regression
-but the report could not be built.
+The gate (``gate``):
+
+* ``"history"`` (default): a regression is a step for the worse in a case's history that is still
+  open at this run (:func:`harness.report.history.open_regressions`: newly not ``ok``, an error
+  grown at least ×2, a calibrated time grown at least ×1.1 beyond its measured noise and seen on
+  two runs) and that no earlier nightly's record lists as open: each regression fails one night,
+  then stays listed as "still open" until the case is back at its level.  The summary lists what
+  changed since the last good run (the latest earlier nightly whose gate passed).
+* ``"previous"``: a regression is a case present in both this run and the previous one that is
+  :data:`REGRESSIONS`: newly failing (``ok`` before, not ``ok`` now), less accurate (main output
+  error more than ``error_factor`` times the previous one) or slower (calibrated time more than
+  ``time_factor`` times the previous one).
+
+The thresholds are command-line options: the campaign file format (:mod:`harness.run.spec`)
+accepts no other keys.  Exit status (:attr:`NightlyOutcome.exit_code`): 0 no regression, 1 at
+least one regression (by the chosen gate), 3 no regression but the report or the history page
+could not be built.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import time
 from dataclasses import dataclass
@@ -34,15 +50,22 @@ import pandas as pd
 
 from harness.run.spec import load_campaign
 from harness.run.campaign import CaseWork, run_campaign
+from harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
+                                    open_regressions)
 from harness.store.compare import compare_runs
-from harness.store.runs import RunStore, latest_run
+from harness.store.runs import RunStore, latest_run, list_runs
 from harness.common.numbers import format_number
 
 #: Default campaign of ``mbh nightly``.
 DEFAULT_CAMPAIGN = "nightly"
-#: Default threshold: an ``ok`` case whose main-output error grew more than this many times.
+#: The gates: on the steps of the campaign's history, or on the previous run alone.
+GATES = ("history", "previous")
+DEFAULT_GATE = "history"
+#: Default threshold of the previous-run gate: an ``ok`` case whose main-output error grew more
+#: than this many times.
 ERROR_FACTOR = 10.0
-#: Default threshold: an ``ok`` case whose calibrated wall time grew more than this many times.
+#: Default threshold of the previous-run gate: an ``ok`` case whose calibrated wall time grew
+#: more than this many times.
 TIME_FACTOR = 2.0
 #: Change classes of :func:`harness.store.compare.compare_runs` that are regressions.
 REGRESSIONS = ("newly failing", "less accurate", "slower")
@@ -50,10 +73,16 @@ REGRESSIONS = ("newly failing", "less accurate", "slower")
 IMPROVEMENTS = ("newly passing", "more accurate", "faster")
 #: Name of the summary file in the run folder.
 SUMMARY_FILE = "nightly_summary.md"
-#: Folder of the reports in the run folder.
+#: Name of the gate's record in the run folder: the gate, whether it passed, the open regressions.
+GATE_FILE = "nightly_gate.json"
+#: Folder of the reports (and the history page) in the run folder.
 REPORT_FOLDER = "report"
 #: Exit status when the report step failed and nothing regressed.
 REPORT_FAILED = 3
+#: How the report step's note begins when it failed.
+FAILED_NOTES = ("report failed", "history page failed")
+#: Most change lines of each list in the summary (the history page has them all).
+SUMMARY_LINES = 30
 
 
 def case_work(campaign):
@@ -61,6 +90,31 @@ def case_work(campaign):
     campaign's bounds and accuracy).  Tests replace it (pytest ``monkeypatch``) to inject a
     regression; nothing else does."""
     return CaseWork(campaign.bounds, campaign.accuracy)
+
+
+@dataclass
+class HistoryGate:
+    """What the history says after this run.
+
+    Attributes
+    ----------
+    changes : DataFrame
+        :func:`harness.report.history.find_changes` over every finished run of the campaign.
+    new : DataFrame
+        Open regressions no earlier nightly's record lists (what fails the history gate).
+    still_open : DataFrame
+        Open regressions an earlier nightly already reported.
+    last_good : str or None
+        The latest earlier nightly run whose gate passed.
+    since_last_good : DataFrame
+        The changes whose first run came after ``last_good`` (all of them without one).
+    """
+
+    changes: pd.DataFrame
+    new: pd.DataFrame
+    still_open: pd.DataFrame
+    last_good: str | None
+    since_last_good: pd.DataFrame
 
 
 @dataclass
@@ -75,8 +129,12 @@ class NightlyOutcome:
         Run id compared against (None: no earlier complete run of the campaign).
     changes : DataFrame
         :func:`harness.store.compare.compare_runs` of the previous run → this one (empty without one).
+    history : HistoryGate
+    gate : str
+        One of :data:`GATES`.
     reports : dict
-        Format → path written; empty when the report step was skipped or failed.
+        ``"html"``, ``"pdf"``, ``"history"`` → path written; empty when the report step was
+        skipped or failed.
     report_note : str
         What happened in the report step.
     summary : str
@@ -87,6 +145,8 @@ class NightlyOutcome:
     store: RunStore
     previous: str | None
     changes: pd.DataFrame
+    history: HistoryGate
+    gate: str
     reports: dict
     report_note: str
     summary: str
@@ -94,14 +154,15 @@ class NightlyOutcome:
 
     @property
     def regressions(self) -> pd.DataFrame:
-        """The rows of :attr:`changes` that are :data:`REGRESSIONS`."""
-        return regressions_of(self.changes)
+        """What fails the gate: the new open regressions of the history, or the rows of
+        :attr:`changes` that are :data:`REGRESSIONS`."""
+        return self.history.new if self.gate == "history" else regressions_of(self.changes)
 
     @property
     def exit_code(self) -> int:
         if len(self.regressions):
             return 1
-        return REPORT_FAILED if self.report_note.startswith("report failed") else 0
+        return REPORT_FAILED if self.report_note.startswith(FAILED_NOTES) else 0
 
 
 def regressions_of(changes: pd.DataFrame) -> pd.DataFrame:
@@ -109,29 +170,86 @@ def regressions_of(changes: pd.DataFrame) -> pd.DataFrame:
     return changes[changes["change"].isin(REGRESSIONS)]
 
 
-def build_reports(store: RunStore, previous: str | None, root, formats) -> tuple[dict, str]:
-    """The run's reports in ``<run folder>/report/``, and a note on what happened.
+def regression_keys(changes: pd.DataFrame) -> pd.Series:
+    """How a gate record names each regression of ``changes``: ``CASE_ID|QUANTITY`` (stable when
+    later runs move the step's estimated first run)."""
+    return changes["case_id"] + "|" + changes["quantity"]
+
+
+def _earlier_records(store: RunStore, root) -> list[tuple[str, dict]]:
+    """(run id, gate record) of the earlier runs of this campaign that have a readable record,
+    newest first."""
+    mine = store.manifest
+    records = []
+    for manifest in reversed(list_runs(root)):
+        if manifest["campaign"] != mine["campaign"] or manifest["started"] >= mine["started"]:
+            continue
+        try:
+            record = json.loads((store.path.parent / manifest["run_id"] / GATE_FILE)
+                                .read_text(encoding="utf-8"))
+        except (OSError, ValueError):  # no record (not a nightly) or a damaged one
+            continue
+        if isinstance(record, dict):
+            records.append((manifest["run_id"], record))
+    return records
+
+
+def history_gate(store: RunStore, root) -> HistoryGate:
+    """The history of this run's campaign, judged against the earlier nightlies' records."""
+    history = load_history(store.manifest["campaign"], root)
+    changes = find_changes(history)
+    open_now = open_regressions(changes)
+    records = _earlier_records(store, root)
+    known = set(records[0][1].get("open", [])) if records else set()
+    last_good = next((run for run, record in records if record.get("passed")), None)
+    is_known = regression_keys(open_now).isin(known)
+    new, still_open = open_now[~is_known], open_now[is_known]
+    runs = history.runs["run_id"].tolist()
+    since = changes[changes["run"] > runs.index(last_good)] if last_good in runs else changes
+    return HistoryGate(changes, new, still_open, last_good, since)
+
+
+def write_gate_record(store: RunStore, gate: str, passed: bool, history: HistoryGate) -> None:
+    """``<run folder>/nightly_gate.json``: the gate, whether it passed, the open regressions."""
+    record = {"gate": gate, "passed": passed,
+              "open": sorted([*regression_keys(history.new),
+                              *regression_keys(history.still_open)])}
+    (store.path / GATE_FILE).write_text(json.dumps(record, indent=1), encoding="utf-8")
+
+
+def build_reports(store: RunStore, previous: str | None, root, formats,
+                  history: HistoryGate | None = None) -> tuple[dict, str]:
+    """The run's reports and the history page in ``<run folder>/report/``, and a note on what
+    happened.
 
     Skipped with a note when :mod:`harness.report.build` is not installed or ``formats`` is
-    empty; a failing build is a note beginning ``"report failed"`` (the run stays stored).
+    empty; a failing build is a note beginning with one of :data:`FAILED_NOTES` (the run stays
+    stored).
     """
     if not formats:
         return {}, "report skipped (--no-report)"
     try:
         from harness.report.build import build_report
+        from harness.report.history_page import build_history
     except ImportError as error:
         return {}, f"report skipped: harness.report.build is not available ({error})"
+    folder = store.path / REPORT_FOLDER
     try:
-        written = build_report(store.run_id, against=previous, formats=formats,
-                               out=store.path / REPORT_FOLDER, root=root)
+        written = build_report(store.run_id, against=previous, formats=formats, out=folder,
+                               root=root)
     except Exception as error:  # noqa: BLE001 — any failure of the report is reported, not fatal
         return {}, f"report failed: {type(error).__name__}: {error}"
+    try:
+        written["history"] = build_history(store.manifest["campaign"], root, folder,
+                                           changes=None if history is None else history.changes)
+    except Exception as error:  # noqa: BLE001 — as the report's
+        return written, f"history page failed: {type(error).__name__}: {error}"
     return written, "report written: " + ", ".join(str(p) for p in written.values())
 
 
 def regression_lines(changes: pd.DataFrame) -> list[str]:
-    """One Markdown table row per regression: case, change, statuses, error and time ratios
-    (the ``|`` of case ids escaped, as tables need)."""
+    """One Markdown table row per regression of the previous-run comparison: case, change,
+    statuses, error and time ratios (the ``|`` of case ids escaped, as tables need)."""
     lines = []
     for row in changes.itertuples(index=False):
         case = row.case_id.replace("|", "\\|")
@@ -142,9 +260,69 @@ def regression_lines(changes: pd.DataFrame) -> list[str]:
     return lines
 
 
+def history_lines(changes: pd.DataFrame, limit: int = SUMMARY_LINES) -> list[str]:
+    """A Markdown table of history changes: case, change, quantity, first run (commit), engine
+    version change, before → after (size), confidence; at most ``limit`` rows, then a count."""
+    lines = ["| case | change | quantity | first run | before → after | confidence |",
+             "|---|---|---|---|---|---|"]
+    for row in changes.head(limit).itertuples(index=False):
+        case = row.case_id.replace("|", "\\|")
+        what = STATUS if row.quantity == STATUS else QUANTITIES[row.quantity][0]
+        levels = (f"{row.before} → {row.after}" if row.quantity == STATUS else
+                  f"{format_number(row.before)} → {format_number(row.after)} "
+                  f"(×{format_number(row.factor)})")
+        upgrade = f", {row.version_change}" if row.version_change else ""
+        lines.append(f"| `{case}` | {row.kind} | {what} | `{row.run_id}` ({row.commit}{upgrade}) "
+                     f"| {levels} | {row.confidence:.3g} |")
+    if len(changes) > limit:
+        lines.append(f"\n… and {len(changes) - limit} more on the history page.")
+    return lines
+
+
+def _previous_section(previous: str | None, changes: pd.DataFrame, gate: str,
+                      error_factor: float, time_factor: float) -> list[str]:
+    if previous is None:
+        return ["No earlier complete run of this campaign under this results root: "
+                "nothing to compare, no regression possible."]
+    found = changes["change"].value_counts()
+    tally = ", ".join(f"{change} {int(found.get(change, 0))}"
+                      for change in (*REGRESSIONS, *IMPROVEMENTS))
+    lines = [f"Compared with `{previous}`: {len(changes)} cases in both runs; {tally} "
+             f"(thresholds: error ×{error_factor:g}, calibrated time ×{time_factor:g}).", ""]
+    if gate != "previous":
+        return lines
+    regressions = regressions_of(changes)
+    if len(regressions):
+        return lines + [f"**{len(regressions)} regression(s):**", "",
+                        "| case | change | status | main-output error | calibrated time |",
+                        "|---|---|---|---|---|", *regression_lines(regressions)]
+    return lines + ["**No regression.**"]
+
+
+def _history_section(history: HistoryGate, gate: str) -> list[str]:
+    counts = history.changes["kind"].value_counts()
+    lines = [f"History: {int(counts.get('regression', 0))} regression(s) and "
+             f"{int(counts.get('improvement', 0))} improvement(s) found over the campaign's "
+             f"runs; {len(history.new) + len(history.still_open)} regression(s) open, "
+             f"{len(history.new)} of them new.", ""]
+    if gate != "history":  # the previous-run gate's summary lists the history's counts only
+        return lines[:1]
+    lines += ([f"**{len(history.new)} new regression(s):**", "", *history_lines(history.new),
+               ""] if len(history.new) else ["**No new regression.**", ""])
+    if len(history.still_open):
+        lines += ["Still open, reported by an earlier nightly:", "",
+                  *history_lines(history.still_open), ""]
+    since = (f"since the last good run `{history.last_good}`" if history.last_good
+             else "over the whole history (no earlier nightly passed its gate)")
+    lines += [f"Changed {since}: {len(history.since_last_good)}."]
+    if len(history.since_last_good):
+        lines += ["", *history_lines(history.since_last_good)]
+    return lines
+
+
 def summary_markdown(outcome_store: RunStore, previous: str | None, changes: pd.DataFrame,
-                     regressions: pd.DataFrame, report_note: str, seconds: float,
-                     error_factor: float, time_factor: float) -> str:
+                     history: HistoryGate, gate: str, report_note: str, seconds: float,
+                     error_factor: float, time_factor: float, reports: dict) -> str:
     """The nightly's Markdown summary (see the module docstring)."""
     cases = outcome_store.cases()
     counts = ", ".join(f"{status} {count}"
@@ -154,30 +332,21 @@ def summary_markdown(outcome_store: RunStore, previous: str | None, changes: pd.
              f"Campaign `{outcome_store.manifest['campaign']}`: {len(cases)} cases ({counts}) "
              f"in {seconds:.0f} s; calibration case "
              + (f"{calibration:.3g} s." if calibration else "not timed (no machine-speed "
-                                                            "figure)."), ""]
-    if previous is None:
-        lines.append("No earlier complete run of this campaign under this results root: "
-                     "nothing to compare, no regression possible.")
-    else:
-        found = changes["change"].value_counts()
-        tally = ", ".join(f"{change} {int(found.get(change, 0))}"
-                          for change in (*REGRESSIONS, *IMPROVEMENTS))
-        lines += [f"Compared with `{previous}`: {len(changes)} cases in both runs; {tally} "
-                  f"(thresholds: error ×{error_factor:g}, calibrated time ×{time_factor:g}).", ""]
-        if len(regressions):
-            lines += [f"**{len(regressions)} regression(s):**", "",
-                      "| case | change | status | main-output error | calibrated time |",
-                      "|---|---|---|---|---|", *regression_lines(regressions)]
-        else:
-            lines.append("**No regression.**")
+                                                            "figure).")
+             + f" Gate: {gate}.", ""]
+    lines += _previous_section(previous, changes, gate, error_factor, time_factor)
+    lines += ["", *_history_section(history, gate)]
+    if "history" in reports:
+        lines += ["", f"History page: `{reports['history']}`."]
     lines += ["", f"Run folder: `{outcome_store.path}`; {report_note}."]
     return "\n".join(lines) + "\n"
 
 
 def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | None = None,
-            error_factor: float = ERROR_FACTOR, time_factor: float = TIME_FACTOR,
-            summary_path=None, formats=("html", "pdf"), quiet: bool = False) -> NightlyOutcome:
-    """Run, compare, report and summarise (see the module docstring).
+            gate: str = DEFAULT_GATE, error_factor: float = ERROR_FACTOR,
+            time_factor: float = TIME_FACTOR, summary_path=None, formats=("html", "pdf"),
+            quiet: bool = False) -> NightlyOutcome:
+    """Run, compare, search the history, report and summarise (see the module docstring).
 
     Parameters
     ----------
@@ -187,20 +356,25 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
         Results root (default :func:`harness.store.runs.results_root`).
     workers : int, optional
         Local worker processes (default: the cores).
+    gate : str
+        One of :data:`GATES`.
     error_factor, time_factor : float
-        Regression thresholds (> 1).
+        Thresholds of the previous-run comparison (> 1).
     summary_path : path, optional
         Markdown summary file (default ``<run folder>/nightly_summary.md``).
     formats : iterable of str
-        Report formats (empty: no report).
+        Report formats (empty: no report and no history page).
     quiet : bool
         No progress bar.
 
     Raises
     ------
     harness.run.spec.CampaignError, harness.run.campaign.RunnerError, ValueError
-        A campaign file with mistakes, a run that cannot start, thresholds not above 1.
+        A campaign file with mistakes, a run that cannot start, thresholds not above 1, an
+        unknown gate.
     """
+    if gate not in GATES:
+        raise ValueError(f"the gate must be one of {', '.join(GATES)}, got {gate!r}")
     for name, value in (("error factor", error_factor), ("time factor", time_factor)):
         if not value > 1:
             raise ValueError(f"the {name} must be above 1, got {value!r}")
@@ -217,14 +391,17 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
         changes = compare_runs(before.cases(), store.cases(), before.calibration_s,
                                store.calibration_s, error_factor=error_factor,
                                time_factor=time_factor)
-    reports, note = build_reports(store, previous, root, tuple(formats))
-    summary = summary_markdown(store, previous, changes, regressions_of(changes), note, seconds,
-                               error_factor, time_factor)
-    path = Path(summary_path) if summary_path else store.path / SUMMARY_FILE
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(summary, encoding="utf-8")
+    history = history_gate(store, root)
+    reports, note = build_reports(store, previous, root, tuple(formats), history)
+    summary = summary_markdown(store, previous, changes, history, gate, note, seconds,
+                               error_factor, time_factor, reports)
+    outcome = NightlyOutcome(store, previous, changes, history, gate, reports, note, summary,
+                             Path(summary_path) if summary_path else store.path / SUMMARY_FILE)
+    write_gate_record(store, gate, not len(outcome.regressions), history)
+    outcome.summary_path.parent.mkdir(parents=True, exist_ok=True)
+    outcome.summary_path.write_text(summary, encoding="utf-8")
     step_summary = os.environ.get("GITHUB_STEP_SUMMARY")
     if step_summary:
         with open(step_summary, "a", encoding="utf-8") as file:
             file.write(summary)
-    return NightlyOutcome(store, previous, changes, reports, note, summary, path)
+    return outcome

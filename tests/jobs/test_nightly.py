@@ -1,4 +1,5 @@
-"""``mbh nightly``: twice in a row no regression; an injected regression is named and fails it.
+"""``mbh nightly --gate previous``: twice in a row no regression; an injected regression is named
+and fails it (the history gate: tests/jobs/test_nightly_history.py).
 
 The campaign is three cheap four-bar cases (1 s at dt 1e-3 s, three timing repetitions each) in a
 temporary results root.  The regressions are injected by replacing the nightly's work function
@@ -62,7 +63,8 @@ class InjectedWork(CaseWork):
 
 def run_nightly(campaign: Path, root: Path, capsys, *extra: str) -> tuple[int, str]:
     code = cli.main(["nightly", "--campaign", str(campaign), "--root", str(root), "--quiet",
-                     "--workers", "2", "--time-factor", str(TIME_FACTOR), *extra])
+                     "--workers", "2", "--gate", "previous", "--time-factor", str(TIME_FACTOR),
+                     *extra])
     return code, capsys.readouterr().out
 
 
@@ -86,6 +88,8 @@ def test_nightly_twice_is_clean_and_an_injected_regression_fails_it(tmp_path, mo
     assert "**No regression.**" in out
     folder = root / second
     assert (folder / "report" / "report.html").is_file() and (folder / "report" / "report.pdf").is_file()
+    assert f"History page: `{folder / 'report' / 'history.html'}`." in out
+    assert (folder / "report" / "history.html").is_file()
     assert (folder / nightly.SUMMARY_FILE).read_text() in step_summary.read_text()
 
     monkeypatch.setattr(nightly, "case_work",
