@@ -19,8 +19,9 @@ the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION
 
 A generated right-hand side is several times faster than the kernel (figures:
 docs/measurements.md, section "In-house step cost").  The cost is the first compilation, seconds
-per function, paid once per formulation and machine: the source goes to :func:`cache_directory`
-under a name made of its hash, where numba caches the compiled function next to it.
+per function, paid once per formulation and machine: the source goes to an entry of
+:mod:`adapters.inhouse.generated_store` named by its hash, where numba caches the compiled
+function next to it.
 
 The traced state is the formulation's start, its coordinates moved by ~1e-6 and its velocities
 by ~1 in a fixed pseudo-random direction, so that no entry is zero there by the start's symmetry
@@ -30,17 +31,14 @@ alone; close enough to the start for the guards on pivots and certificates to ho
 from __future__ import annotations
 
 import hashlib
-import importlib.util
-import os
 import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 from numba import cfunc, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from adapters.inhouse import banded, bodykin, dynamics, kernels, linalg, tracing
+from adapters.inhouse import banded, bodykin, dynamics, generated_store, kernels, linalg, tracing
 
 # The compiled loop takes the generated functions as first-class function values, a numba
 # feature still labelled experimental (a warning at every compilation that types one); the tests
@@ -70,16 +68,6 @@ class NotGenerated(RuntimeError):
     """No generated function for this formulation: the trace passed :data:`MAX_OPERATIONS`, the
     kernel took a path that cannot be traced (LAPACK: the banded solves, the truncated SVD of a
     system without a certificate at the traced state), or the source did not compile."""
-
-
-def cache_directory() -> Path:
-    """Where generated sources (and numba's cache of them) live: ``$MBH_GENERATED_DIR``, else
-    ``$XDG_CACHE_HOME/mbh/generated`` (``~/.cache/mbh/generated``)."""
-    explicit = os.environ.get("MBH_GENERATED_DIR")
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "mbh" / "generated"
 
 
 #: The generated functions, by their index in :func:`functions`' tuple (all of
@@ -159,7 +147,8 @@ class NotCompiled(NotGenerated):
 def compiled_function(which: int, formulation, q0: np.ndarray, v0: np.ndarray,
                       compile_new: bool = True):
     """Generated function ``which`` of ``formulation``, compiled (a ``cfunc`` of
-    :data:`SIGNATURE`), from numba's cache when this source was compiled before.
+    :data:`SIGNATURE`), from numba's cache when this source was compiled before
+    (:mod:`adapters.inhouse.generated_store`: a damaged entry is compiled again).
 
     Raises
     ------
@@ -176,26 +165,15 @@ def compiled_function(which: int, formulation, q0: np.ndarray, v0: np.ndarray,
     name = "mbh_" + hashlib.sha256(source.encode()).hexdigest()[:24]
     module = sys.modules.get(name)
     if module is None:
-        directory = cache_directory()
-        path = directory / f"{name}.py"
-        compiled_mark = directory / f"{name}.compiled"
-        if not compile_new and not compiled_mark.exists():
+        if not compile_new and not generated_store.is_compiled(name):
             raise NotCompiled("not compiled yet")
-        directory.mkdir(parents=True, exist_ok=True)
-        if not path.exists():  # written whole, then renamed: a concurrent reader never sees half
-            partial = directory / f"{name}.{os.getpid()}.tmp"
-            partial.write_text(source, encoding="utf-8")
-            os.replace(partial, path)
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module  # numba's cache finds the module's globals by its name
         try:
-            spec.loader.exec_module(module)  # compiles the cfunc, or loads it from the cache
+            module = generated_store.load(name, source)
+        except generated_store.GeneratedCacheSettingError:
+            raise
         except Exception as error:  # noqa: BLE001 — a generator fault must not end the run
-            del sys.modules[name]
-            raise NotGenerated(f"{path} does not compile: {type(error).__name__}: "
-                               f"{str(error)[:300]}") from None
-        compiled_mark.touch()  # numba's cache of it is written: later runs load it
+            raise NotGenerated(f"{generated_store.entry_folder(name)} does not compile: "
+                               f"{type(error).__name__}: {str(error)[:300]}") from None
     return getattr(module, _NAMES[which])
 
 

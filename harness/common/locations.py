@@ -11,8 +11,9 @@ Shipped files (read only):
 Written files, never inside the installed package:
 
 * the user cache (:func:`user_cache`): references of scenes that are not shipped, generated
-  functions and compiled kernels; ``$MBH_CACHE_HOME``, else the platform's cache folder for
-  ``mbh`` (``$XDG_CACHE_HOME/mbh`` or ``~/.cache/mbh`` on Linux, via :mod:`platformdirs`);
+  functions (:func:`generated_cache`) and compiled kernels (:mod:`harness.common.kernel_cache`);
+  ``$MBH_CACHE_HOME``, else the platform's cache folder for ``mbh`` (``$XDG_CACHE_HOME/mbh`` or
+  ``~/.cache/mbh`` on Linux, via :mod:`platformdirs`);
 * the results root (:func:`harness.store.runs.results_root`): ``$MBH_RESULTS_DIR``, else
   ``results/`` in a checkout, else the platform's data folder for ``mbh`` (``~/.local/share/mbh``
   on Linux).
@@ -28,6 +29,8 @@ import platformdirs
 
 #: Environment variable moving the whole user cache.
 CACHE_ENV = "MBH_CACHE_HOME"
+#: Environment variable moving the generated functions alone.
+GENERATED_ENV = "MBH_GENERATED_DIR"
 #: The folders shipped with the harness.
 SHIPPED = ("scenarios", "campaigns")
 
@@ -55,6 +58,13 @@ def user_cache() -> Path:
     """The user cache folder: ``$MBH_CACHE_HOME``, else the platform's user cache folder."""
     configured = os.environ.get(CACHE_ENV)
     return Path(configured) if configured else platformdirs.user_cache_path("mbh")
+
+
+def generated_cache() -> Path:
+    """The folder of the generated functions (:mod:`adapters.inhouse.generated`):
+    ``$MBH_GENERATED_DIR``, else ``generated`` in :func:`user_cache`."""
+    configured = os.environ.get(GENERATED_ENV)
+    return Path(configured) if configured else user_cache() / "generated"
 
 
 def user_data() -> Path:

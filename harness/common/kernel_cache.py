@@ -1,0 +1,144 @@
+"""Where numba caches the compiled code of the harness and the in-house formulation, placed so
+that a changed kernel never loads a binary built from its old code.
+
+numba's own cache (``cache=True``) checks a function against its own source file only: a kernel
+that calls kernels of other files, or reads their constants, would load a binary built from their
+old code after they change (and a run would crash or compute the old numbers).  :func:`install`
+puts :class:`KernelCacheLocator` first among numba's cache locators, which places
+
+* the cache of every function defined in :data:`KERNEL_PACKAGES` in :func:`kernel_folder`:
+  ``numba/<fingerprint>`` in the user cache (:func:`harness.common.locations.user_cache`), the
+  fingerprint (:func:`fingerprint`) digesting the source of every module of those packages that
+  uses numba (:func:`kernel_sources`) and the Python, numba and llvmlite versions.  An edit to any of them, or another numba, makes a new
+  folder, compiled afresh (minutes, once); going back to the old code finds the old folder.  The
+  :data:`KEEP` folders used last stay, older ones are removed;
+* the cache of a generated function (under :func:`harness.common.locations.generated_cache`)
+  beside its source, so that an entry of :mod:`adapters.inhouse.generated_store` is one folder.
+
+A compiled kernel calls and reads only the modules of :func:`kernel_sources` (besides numpy,
+scipy's LAPACK and numba itself); the test named there checks every global each kernel reads.
+A user's
+``NUMBA_CACHE_DIR`` applies to other numba code, not to these functions: it is not keyed by the
+code, so it would bring the stale binaries back (``NUMBA_CACHE_LOCATOR_CLASSES`` replaces every
+locator, this one included).  Where the user cache cannot be written, the folder is made under
+the temporary directory instead.
+
+Numba chooses a function's locator when the function is decorated, so :func:`install` runs at
+the import of the two packages (their ``__init__``), before any of their modules; every process
+that imports them, a campaign's workers included, installs it itself.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import os
+import shutil
+import sys
+import tempfile
+from collections.abc import Iterable
+from pathlib import Path
+
+import llvmlite
+import numba
+from numba.core import caching
+
+from harness.common.locations import generated_cache, user_cache
+
+_ROOT = Path(__file__).resolve().parents[2]
+#: The packages whose modules define cached kernels (``@njit(cache=True)``, ``@cfunc``).
+KERNEL_PACKAGES = (_ROOT / "adapters" / "inhouse", _ROOT / "harness" / "neutral")
+#: Fingerprint folders kept: the one in use and the ones used last (other checkouts, branches).
+KEEP = 3
+#: The file of a fingerprint folder whose modification time is its last use.
+LAST_USE = "last-use"
+
+
+def toolchain() -> str:
+    """The Python, numba and llvmlite versions: a binary built by others is not loaded."""
+    return f"python {sys.version}; numba {numba.__version__}; llvmlite {llvmlite.__version__}"
+
+
+def fingerprint(files: Iterable[Path] = ()) -> str:
+    """16 hex digits of SHA-256 over :func:`toolchain` and the name (relative to the checkout or
+    site-packages) and content of each of ``files``, in the order given."""
+    digest = hashlib.sha256(toolchain().encode())
+    for path in files:
+        digest.update(path.relative_to(_ROOT).as_posix().encode() + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
+def kernel_sources() -> list[Path]:
+    """The modules of :data:`KERNEL_PACKAGES` that use numba (their text names it), sorted: the
+    jitted kernels, and so everything a compiled kernel calls or reads (checked by
+    ``tests/common/test_kernel_cache.py``).  An edit elsewhere in the packages compiles nothing."""
+    return sorted(path for package in KERNEL_PACKAGES for path in package.rglob("*.py")
+                  if b"numba" in path.read_bytes())
+
+
+@functools.cache
+def kernel_folder() -> Path:
+    """This code's folder of compiled kernels: ``numba/<fingerprint of kernel_sources()>`` in the
+    user cache (else in the temporary directory), marked used; older folders beyond :data:`KEEP`
+    are removed.  Computed once per process."""
+    name = fingerprint(kernel_sources())
+    user = os.getuid() if hasattr(os, "getuid") else "user"  # a per-user temporary directory
+    for root in (user_cache() / "numba", Path(tempfile.gettempdir()) / f"mbh-{user}" / "numba"):
+        folder = root / name
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            (folder / LAST_USE).touch()
+        except OSError:
+            continue
+        _prune(root)
+        return folder
+    raise OSError(f"no writable folder for compiled kernels ({user_cache() / 'numba'})")
+
+
+def _prune(root: Path) -> None:
+    """Remove the fingerprint folders of ``root`` beyond the :data:`KEEP` used last."""
+    def last_use(folder: Path) -> float:
+        stamp = folder / LAST_USE
+        return (stamp if stamp.exists() else folder).stat().st_mtime
+
+    try:
+        folders = sorted((path for path in root.iterdir() if path.is_dir()), key=last_use,
+                         reverse=True)
+    except OSError:  # another process pruned the same folder meanwhile
+        return
+    for folder in folders[KEEP:]:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def cache_folder(source: Path) -> Path | None:
+    """Where numba caches the functions defined in ``source``: in :func:`kernel_folder` for the
+    kernel packages (one subfolder per source folder, as numba names them), beside the source for
+    a generated function, None (numba's own choice) for any other code."""
+    source = source.resolve()
+    if any(source.is_relative_to(package) for package in KERNEL_PACKAGES):
+        return kernel_folder() / KernelCacheLocator.get_suitable_cache_subpath(str(source))
+    if source.is_relative_to(generated_cache().resolve()):
+        return source.parent / "__pycache__"
+    return None
+
+
+class KernelCacheLocator(caching.InTreeCacheLocator):
+    """numba's cache locator for the harness's functions (:func:`cache_folder`); declines any
+    other code, which the next locator takes."""
+
+    def __init__(self, py_func, py_file):
+        super().__init__(py_func, py_file)
+        self._cache_path = str(cache_folder(Path(py_file)))
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        if cache_folder(Path(py_file)) is None:
+            return None
+        return super().from_function(py_func, py_file)
+
+
+def install() -> None:
+    """Put :class:`KernelCacheLocator` first among numba's cache locators (once per process)."""
+    if KernelCacheLocator not in caching.CacheImpl._locator_classes:
+        caching.CacheImpl._locator_classes.insert(0, KernelCacheLocator)
