@@ -94,6 +94,7 @@ class CompiledStepper(FormulationStepper):
         calls = grid.steps(grid.t_end) * tableau.c.size
         functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
             compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
+        self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
         self._model = (np.asarray(formulation.gains, dtype=float),
                        np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
                        formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
@@ -238,6 +239,17 @@ class CompiledStepper(FormulationStepper):
         return "failed", "LinAlgError: a factorisation failed in the compiled step"
 
     # -- reading -------------------------------------------------------------------------------
+    def run(self, grid: RunGrid, n_bodies: int):
+        """:meth:`Stepper.run`, with a note of the right-hand sides the generated function handed
+        back to the kernels (:func:`hand_back_note`)."""
+        trajectory = super().run(grid, n_bodies)
+        if self._accelerations_generated:
+            note = hand_back_note(int(self._counters[compiled.KERNEL_CALLS]),
+                                  int(self._counters[compiled.RHS_EVALS]))
+            if note:
+                trajectory.notes.append(note)
+        return trajectory
+
     def _states(self, t: float) -> BodyStates:
         if self.steps == 0:
             return body_states(self.layout, *self._start_state)
@@ -255,6 +267,19 @@ class CompiledStepper(FormulationStepper):
                 "kernel_calls": int(self._counters[compiled.KERNEL_CALLS]),
                 "repartitions": getattr(self.formulation, "repartitions", 0),
                 "passages": int(self.passages.count[0])}
+
+
+def hand_back_note(kernel_calls: int, rhs_evals: int) -> str | None:
+    """The note of a run whose generated right-hand side handed ``kernel_calls`` of its
+    ``rhs_evals`` calls back to the kernels (None for none): one of its guards (a pivot or a
+    certificate bound of its solves, :mod:`.generated`) came out otherwise than at the traced
+    state, so the kernel served those calls at the kernel's cost."""
+    if kernel_calls == 0:
+        return None
+    return (f"generated functions handed back {kernel_calls} of {rhs_evals} right-hand sides "
+            f"({100.0 * kernel_calls / rhs_evals:.3g} %) to the kernels: a guard of the "
+            f"generated right-hand side (a pivot or a certificate bound of its solves) came out "
+            f"otherwise than at the traced start")
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,9 @@ from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_
                                      pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import (certified_spd_solve, matvec, rmatvec, skippable,
-                                     truncated_solve, weighted_gram)
+from adapters.inhouse.linalg import (_cholesky, back_substitution, certified_spd_solve,
+                                     column_gram, forward_substitution, matvec, rmatvec,
+                                     skippable, truncated_solve, weighted_gram)
 from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
@@ -230,8 +231,14 @@ def _mass_matrix(q, nc, masses, inertias):
         if nc == PLANAR_NC:
             mass[k + 2, k + 2] = inertias[b, 2, 2]
             continue
-        g = g_bar(q[k + 3:k + 7])
-        mass[k + 3:k + 7, k + 3:k + 7] = g.T @ inertias[b] @ g
+        g, inertia = _g_bar_rows(q, k + 3), inertias[b]
+        for r in range(4):  # (Ḡᵀ J̄) Ḡ in plain loops: the same sums traced (no BLAS call)
+            left = (g[0][r] * inertia[0, 0] + g[1][r] * inertia[1, 0] + g[2][r] * inertia[2, 0],
+                    g[0][r] * inertia[0, 1] + g[1][r] * inertia[1, 1] + g[2][r] * inertia[2, 1],
+                    g[0][r] * inertia[0, 2] + g[1][r] * inertia[1, 2] + g[2][r] * inertia[2, 2])
+            for c in range(4):
+                mass[k + 3 + r, k + 3 + c] = left[0] * g[0][c] + left[1] * g[1][c] \
+                    + left[2] * g[2][c]
     return mass
 
 
@@ -506,11 +513,59 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
 @njit(cache=True)
 def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
     """q̈ of :func:`range_space_acceleration` by its M̃ form, with the truncated SVD where the
-    range-space matrix has no certificate, shape (n,)."""
+    range-space matrix has no certificate, shape (n,).
+
+    M̃ = L Lᵀ (Cholesky, plain loops) gives W = L⁻¹Φ_qᵀ (row i of ``weighted`` is L⁻¹Φ_q[i]ᵀ)
+    and y = L⁻¹Q, so Φ_q M̃⁻¹ Φ_qᵀ = WᵀW, Φ_q M̃⁻¹ Q = Wᵀy and q̈ = L⁻ᵀ(y + Wμ): no LAPACK
+    call, so the generated functions can trace it (slender spatial bodies, whose mass blocks
+    :func:`spatial_block_acceleration` refuses, come here).  Where M̃ has a pivot that is not
+    positive (a body free to spin about an axis of zero moment) LU solves it as before.
+    """
     n, m = mass.shape[0], jacobian.shape[0]
-    scale = np.sum(jacobian * jacobian)
-    rho = np.trace(mass) / scale if scale > 0.0 else 0.0
-    augmented = mass + rho * (jacobian.T @ jacobian)
+    scale = 0.0
+    for i in range(m):
+        for c in range(n):
+            scale += jacobian[i, c] * jacobian[i, c]
+    trace = 0.0
+    for c in range(n):
+        trace += mass[c, c]
+    rho = trace / scale if scale > 0.0 else 0.0
+    augmented = mass + rho * column_gram(jacobian)
+    positive, lower = _cholesky(augmented)
+    if not positive:
+        return _lu_mass_acceleration(augmented, jacobian, force, gamma, cut)
+    free = forward_substitution(lower, force)
+    if m == 0:
+        return back_substitution(lower, free)
+    weighted = np.empty((m, n))
+    for i in range(m):
+        weighted[i] = forward_substitution(lower, jacobian[i])
+    reduced = np.zeros((m, m))
+    for i in range(m):
+        for j in range(i + 1):
+            total = 0.0
+            for c in range(n):
+                total += weighted[i, c] * weighted[j, c]
+            reduced[i, j] = reduced[j, i] = total
+    mu = _multipliers(reduced, gamma - matvec(weighted, free), cut)
+    return back_substitution(lower, free + rmatvec(weighted, mu))
+
+
+@njit(cache=True)
+def _multipliers(reduced, residual, cut):
+    """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): Cholesky where
+    certified, else the truncated SVD at ``cut``, shape (m,)."""
+    certified, mu = certified_spd_solve(reduced, residual, cut)
+    if not certified:
+        mu = truncated_solve(reduced, residual, cut)
+    return mu
+
+
+@njit(cache=True)
+def _lu_mass_acceleration(augmented, jacobian, force, gamma, cut):
+    """q̈ of :func:`augmented_mass_acceleration` for an M̃ (``augmented``, (n, n)) that is not
+    positive definite: LU (LAPACK gesv) solves M̃ [free, columns] = [Q, Φ_qᵀ], shape (n,)."""
+    n, m = augmented.shape[0], jacobian.shape[0]
     rhs = np.empty((n, m + 1))
     rhs[:, 0] = force
     rhs[:, 1:] = jacobian.T
@@ -518,11 +573,7 @@ def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
     free, columns = solved[:, 0], np.ascontiguousarray(solved[:, 1:])
     if m == 0:
         return free
-    reduced, residual = jacobian @ columns, gamma - jacobian @ free
-    certified, mu = certified_spd_solve(reduced, residual, cut)
-    if not certified:
-        mu = truncated_solve(reduced, residual, cut)
-    return free + columns @ mu
+    return free + columns @ _multipliers(jacobian @ columns, gamma - jacobian @ free, cut)
 
 
 @njit(cache=True)
@@ -598,9 +649,10 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
             constraint_args[4], sparsity_arrays, ACCELERATION_CUT)
         if accepted:
             return acceleration
-    if nc != PLANAR_NC or jac.shape[0] == 0:
-        return range_space_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
-                                        ACCELERATION_CUT)
+    if nc != PLANAR_NC or jac.shape[0] == 0:  # range_space_acceleration's M̃ branch: an Euler-
+        # parameter M is singular, never positive diagonal (a test there would guard on zeros)
+        return augmented_mass_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force,
+                                           target, ACCELERATION_CUT)
     diagonal = planar_mass_diagonal(masses, inertias)  # range_space_acceleration's diagonal
     if np.all(diagonal > 0.0):                          # branch without assembling M
         accepted, acceleration = diagonal_mass_acceleration(1.0 / diagonal, jac, force, target,

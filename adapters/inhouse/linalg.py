@@ -88,7 +88,14 @@ def _cholesky(matrix):
 @njit(cache=True)
 def _cholesky_solve(lower, rhs):
     """x with lower @ lowerᵀ @ x = rhs, lower (k, k) lower triangular: forward then back
-    substitution in one array (numba offers no triangular solve)."""
+    substitution (numba offers no triangular solve)."""
+    return back_substitution(lower, forward_substitution(lower, rhs))
+
+
+@njit(cache=True)
+def forward_substitution(lower, rhs):
+    """x with lower @ x = rhs, lower (k, k) lower triangular with a non-zero diagonal, rhs (k,),
+    shape (k,)."""
     k = rhs.shape[0]
     x = np.empty(k)
     for i in range(k):
@@ -96,6 +103,15 @@ def _cholesky_solve(lower, rhs):
         for j in range(i):
             s -= lower[i, j] * x[j]
         x[i] = s / lower[i, i]
+    return x
+
+
+@njit(cache=True)
+def back_substitution(lower, rhs):
+    """x with lowerᵀ @ x = rhs, lower (k, k) lower triangular with a non-zero diagonal, rhs (k,),
+    shape (k,)."""
+    k = rhs.shape[0]
+    x = rhs.copy()
     for i in range(k - 1, -1, -1):
         s = x[i]
         for j in range(i + 1, k):
@@ -243,6 +259,25 @@ def weighted_gram(matrix, weights):
             scaled = matrix[i, c] * weights[c]
             for j in range(i + 1):
                 gram[i, j] += scaled * matrix[j, c]
+        for j in range(i):
+            gram[j, i] = gram[i, j]
+    return gram
+
+
+@njit(cache=True)
+def column_gram(matrix):
+    """AᵀA for A = ``matrix`` (m, n), shape (n, n), exactly symmetric: row by row of A, the lower
+    triangle accumulated and mirrored, A's zeros skipped (plain loops, no BLAS call)."""
+    m, n = matrix.shape
+    gram = np.zeros((n, n))
+    for r in range(m):
+        for i in range(n):
+            x = matrix[r, i]
+            if skippable(x):
+                continue
+            for j in range(i + 1):
+                gram[i, j] += x * matrix[r, j]
+    for i in range(n):
         for j in range(i):
             gram[j, i] = gram[i, j]
     return gram

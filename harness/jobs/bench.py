@@ -1,16 +1,19 @@
 """``mbh bench``: the speed figures, measured side by side in one run and printed as ratios.
 
-Four parts (each a function returning plain rows, so the CLI prints them and tests can call them
+Five parts (each a function returning plain rows, so the CLI prints them and tests can call them
 on tiny inputs):
 
 * :func:`front_rows` — the in-house Pareto front against the best engine's: from the cases of the
-  ``bench`` campaign (every adapter's candidate methods on fourbar and slider_crank over a ladder
+  ``bench`` campaign (every adapter's candidate methods on every shipped scene over a ladder
   of steps), the fastest ``ok`` case reaching each accuracy level on the main output, in-house
   versus every engine (:func:`harness.report.summary.front_ratio_table`, also in the report).
 * :func:`overhead_rows` — each adapter's time per step in :meth:`Adapter.simulate` over its bare
   loop (:meth:`Adapter.bare_loop`: the same steps with no samples and no checks), measured
   interleaved, best of ``repeats``; and the state read-back time per sample
   (:attr:`Trajectory.read_back_s`), which is outside ``wall_time_s``.
+* :func:`fallback_rows` — per shipped scene, the right-hand sides the in-house generated loop
+  handed back to the generic kernels (``kernel_calls`` / ``rhs_evals``) and the run's note saying
+  why (a function not generated, a guard that failed).
 * :func:`scaling_rows` — cost per simulated second of each adapter's ``best`` on the N-four-bar
   family, and the fitted exponent of cost ∝ N^p from N = 4 to the largest N run.
 * :func:`reference_rows` — the reference build times: the stored cost of each route and the same
@@ -31,8 +34,10 @@ from adapters.base import UnsupportedCase
 from harness.model import scenario
 from harness.model.timegrid import sample_times
 
-#: Scenarios and step of the overhead measurement.
-OVERHEAD_SCENARIOS = ("fourbar", "slider_crank")
+#: Scenarios of the overhead and fallback measurements: every shipped scene.
+SCENES = tuple(scenario.scenario_names())
+#: The generated loop of the fallback table: the in-house ``best`` formulation and integrator.
+FALLBACK_METHOD = "rk4+direct:loop=generated"
 #: Members of the N-four-bar family in the scaling table; the exponent is fitted from N = 4 on.
 SCALING_N = (1, 2, 4, 8, 16, 32, 64)
 SCALING_FIT_FROM = 4
@@ -42,7 +47,7 @@ def _simulate(adapter, model, mech, method: str, dt: float, t_end: float):
     return adapter.simulate(model, method, dt, t_end, sample_times(dt, t_end, mech.sample_step))
 
 
-def overhead_rows(adapters=None, scenarios=OVERHEAD_SCENARIOS, methods=("default", "best"),
+def overhead_rows(adapters=None, scenarios=SCENES, methods=("default", "best"),
                   dt: float = 1e-3, t_end: float = 4.0, repeats: int = 5) -> list[dict]:
     """Adapter time per step over bare-loop time per step, per adapter, scenario and method.
 
@@ -93,6 +98,30 @@ def _measure_overhead(adapter, model, mech, method, dt, t_end, steps, repeats) -
                                  read_back_us=1e6 * min(read_back), note=str(error))
     return _overhead_row(adapter.name, mech.name, method, 1e6 * min(simulated), 1e6 * min(bare),
                          1e6 * min(read_back))
+
+
+def fallback_rows(scenarios=SCENES, method: str = FALLBACK_METHOD, dt: float = 1e-4,
+                  t_end: float = 1.0) -> list[dict]:
+    """Right-hand sides the generated loop handed back to the kernels, per scene: a run of
+    ``method`` for ``t_end`` s (at most the scene's duration) at ``dt``.
+
+    Returns
+    -------
+    list of dict
+        ``scenario, status, kernel_calls, rhs_evals, fraction, note`` (fraction = kernel_calls /
+        rhs_evals; note: the run's notes on generated functions, "" when every call was served).
+    """
+    adapter = get_adapter("inhouse")
+    rows = []
+    for scene in scenarios:
+        mech = scenario.load(scene)
+        run = _simulate(adapter, adapter.build(mech), mech, method, dt, min(t_end, mech.duration))
+        kernel, calls = run.counters.get("kernel_calls"), run.counters.get("rhs_evals")
+        rows.append({"scenario": scene, "status": run.status, "kernel_calls": kernel,
+                     "rhs_evals": calls,
+                     "fraction": kernel / calls if kernel is not None and calls else None,
+                     "note": "; ".join(note for note in run.notes if "generat" in note)})
+    return rows
 
 
 def scaling_rows(adapters=None, members=SCALING_N, dt: float = 1e-3,

@@ -276,6 +276,65 @@ def _springs(draw, bodies: tuple[Body, ...], planar: bool) -> SpringDamper:
                         draw(st.floats(0.0, 2.0)), draw(st.floats(0.1, 1.0)))
 
 
+_AXES = tuple(np.eye(3))
+#: Principal moments of :func:`aligned_mechanisms`' bodies over m/12 (kg·m² per kg): bars along
+#: x and z, a disc, and a slender bar along y (no moment about y; the joints on the x axis hold
+#: its spin).
+_ALIGNED_MOMENTS = ((0.02, 1.0, 1.0), (1.0, 1.0, 0.02), (0.5, 0.5, 1.0), (1.0, 0.0, 1.0))
+
+
+@st.composite
+def aligned_mechanisms(draw, planar: bool | None = None) -> Mechanism:
+    """A chain of 2 to 4 bodies with a start of exact zeros and symmetry: bodies at (i + ½, 0, 0)
+    m in the identity orientation (Euler parameters (1, 0, 0, 0)), principal axes along the
+    world's (:data:`_ALIGNED_MOMENTS`, slender bars included), joints at (i, 0, 0) with coordinate axes, spring-dampers (stiffness up to 1e5 N/m)
+    along coordinate directions, gravity along −y or −z, a driver rate of 0 or ±1 — the starts
+    the random poses of :func:`mechanisms` never draw.
+
+    Parameters
+    ----------
+    planar : bool or None
+        Force the kind; None draws it.
+    """
+    planar = draw(st.booleans()) if planar is None else planar
+    types = PLANAR_JOINT_TYPES if planar else JOINT_TYPES
+    count = draw(st.integers(2, 4))
+    bodies: dict[str, Body] = {}
+    joints = []
+    for index in range(count):
+        name, mass = f"b{index}", draw(st.sampled_from([1.0, 2.0]))
+        moments = mass / 12.0 * np.array(draw(st.sampled_from(_ALIGNED_MOMENTS)))
+        bodies[name] = Body(name=name, mass=mass, inertia=np.diag(moments),
+                            position=np.array([index + 0.5, 0.0, 0.0]), rotation=np.eye(3))
+        kind = draw(st.sampled_from([t for t in types if index > 0 or t in DRIVABLE]))
+        axis = _Z if planar and kind == "revolute" else draw(st.sampled_from(
+            _AXES[:2] if planar else _AXES))
+        joints.append(draw(_joints(f"j{index}", kind, GROUND if index == 0 else f"b{index - 1}",
+                                   name, bodies, np.array([float(index), 0.0, 0.0]), planar,
+                                   axis=axis)))
+    forces = []
+    for k in range(draw(st.integers(0, 2))):
+        ends = draw(st.lists(st.sampled_from([GROUND, *bodies]), min_size=2, max_size=2,
+                             unique=True))
+        start = bodies[ends[0]].position if ends[0] in bodies else np.zeros(3)
+        end = start + draw(st.sampled_from(_AXES[:2] if planar else _AXES))
+        point1, _ = _local(bodies, ends[0], start, None)
+        point2, _ = _local(bodies, ends[1], end, None)
+        forces.append(SpringDamper(f"spring{k}", ends[0], ends[1], point1, point2,
+                                   draw(st.sampled_from([1e2, 1e4, 1e5])),
+                                   draw(st.sampled_from([0.0, 10.0])),
+                                   draw(st.sampled_from([1.0, 0.9]))))
+    gravity = np.array([0.0, -9.81, 0.0]) if planar or draw(st.booleans()) else \
+        np.array([0.0, 0.0, -9.81])
+    mech = Mechanism(
+        name="generated", kind="planar" if planar else "spatial", bodies=tuple(bodies.values()),
+        joints=tuple(joints), forces=tuple(forces), gravity=gravity,
+        initial=InitialState(driver="j0", value=0.0,
+                             rate=draw(st.sampled_from([0.0, 1.0, -1.0]))),
+        duration=1.0, outputs=(), tags=("generated",), source="harness.testing.strategies")
+    return _with_hash(mech)
+
+
 def _content_hash(mech: Mechanism) -> str:
     """A digest of everything in ``mech`` that an engine reads, in declaration order."""
     digest = hashlib.sha256(mech.kind.encode())

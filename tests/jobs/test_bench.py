@@ -64,3 +64,11 @@ def test_a_python_path_method_has_no_bare_loop_and_says_so():
 def test_unknown_bench_part_is_refused_by_name(capsys):
     assert main(["bench", "--parts", "front,speedometer"]) == 2
     assert "--parts: unknown part(s) speedometer" in capsys.readouterr().err
+
+
+def test_fallback_rows_count_the_calls_the_kernels_served():
+    """fourbar's generated right-hand side serves every call (measured: no guard fails there)."""
+    (row,) = bench.fallback_rows(scenarios=["fourbar"], dt=1e-3, t_end=0.05)
+    assert (row["scenario"], row["status"], row["kernel_calls"], row["rhs_evals"]) == \
+        ("fourbar", "ok", 0, 200)
+    assert row["fraction"] == 0.0 and row["note"] == ""

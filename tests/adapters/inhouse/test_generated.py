@@ -16,14 +16,16 @@ import types
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, event, given, reject, settings
-from numba import njit
+from hypothesis import strategies as st
+from numba import cfunc, njit
 
 from adapters import get_adapter
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import generated, tracing
+from adapters.inhouse import dynamics, generated, generated_store, tracing
+from adapters.inhouse.compiled_stepper import hand_back_note
 from harness.model import scenario
 from harness.neutral.assembly import AssemblyError
-from harness.testing.strategies import mechanisms
+from harness.testing.strategies import aligned_mechanisms, mechanisms
 from harness.model.timegrid import sample_times
 from tests.helpers import LARGE_TRACES, PATH_BOUND
 
@@ -149,9 +151,10 @@ def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypa
     # (ρ̂'s function does not depend on the gains: another test may have compiled it already.)
     assert any(note.startswith("not generated: acceleration") and "(not compiled yet)" in note
                for note in first.notes), first.notes
-    assert not list(tmp_path.glob("*.compiled"))
+    compiled_marks = f"*/*/{generated_store.USED}"  # <toolchain>/<entry>/used
+    assert not list(tmp_path.glob(compiled_marks))
     long = run(0.3)
-    assert long.counters["kernel_calls"] == 0 and list(tmp_path.glob("*.compiled"))
+    assert long.counters["kernel_calls"] == 0 and list(tmp_path.glob(compiled_marks))
     again = run(0.1)
     assert again.counters["kernel_calls"] == 0
     # Two paths to the same numbers (measured equal to the bit): bounded as tests/
@@ -191,3 +194,142 @@ def test_generated_functions_on_drawn_mechanisms_compute_what_the_kernels_comput
                 continue
             scale = max(np.abs(expected).max(), np.finfo(float).tiny)
             assert np.abs(out[:expected.size] - expected).max() <= RELATIVE_BOUND * scale
+
+
+# --- Hand-backs are noted; starts of exact zeros and symmetry -----------------------------------
+
+@cfunc(generated.SIGNATURE)
+def _declines(q, v, t, out):
+    """A generated right-hand side whose guard always fails."""
+    return 0
+
+
+def test_a_run_whose_guards_hand_calls_back_says_so_with_the_fraction(monkeypatch):
+    """Every call handed back (a stand-in whose guard always fails): the kernels serve all 400
+    right-hand sides of 100 rk4 steps and the run's notes give the count and the fraction."""
+    def functions(formulation, q0, v0, wanted, compile_new=True):
+        return (_declines, *generated.NOTHING[1:]), []
+
+    monkeypatch.setattr(generated, "functions", functions)
+    run = get_adapter("inhouse").simulate(scenario.load("fourbar"), "rk4+direct:loop=generated",
+                                          1e-3, 0.1, sample_times(1e-3, 0.1))
+    assert run.status == "ok" and run.counters["kernel_calls"] == run.counters["rhs_evals"] == 400
+    assert "generated functions handed back 400 of 400 right-hand sides (100 %) to the kernels" \
+        in " ".join(run.notes)
+
+
+def test_the_hand_back_note_is_absent_when_every_call_was_served():
+    assert hand_back_note(0, 8000) is None
+    assert "handed back 75879 of 80000 right-hand sides (94.8 %)" in hand_back_note(75879, 80000)
+
+
+def _generated_and_kernel_runs(mech):
+    """rk4+direct at dt 1e-3 s for 0.25 s on the generated loop and on the kernels alone."""
+    adapter = get_adapter("inhouse")
+    model = adapter.build(mech)
+    return [adapter.simulate(model, f"rk4+direct:loop={loop}", 1e-3, 0.25,
+                             sample_times(1e-3, 0.25, 0.05)) for loop in ("generated", "compiled")]
+
+
+def _check_generated_serves(mech):
+    """The generated loop's right-hand sides served (kernel_calls ≤ 1 % of rhs_evals) or a note
+    saying why not; the same trajectory as the kernels' (PATH_BOUND)."""
+    fast, kernels = _generated_and_kernel_runs(mech)
+    assert fast.status == kernels.status and fast.steps == kernels.steps
+    why = [note for note in fast.notes if note.startswith("not generated: acceleration")]
+    assert why or fast.counters["kernel_calls"] <= fast.counters["rhs_evals"] // 100, fast.notes
+    event("not generated" if why else "generated")
+    assert np.abs(fast.position - kernels.position).max() <= PATH_BOUND
+    assert np.abs(fast.velocity - kernels.velocity).max() <= PATH_BOUND
+
+
+@settings(max_examples=3, derandomize=True, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(mech=aligned_mechanisms())
+def test_generated_loops_serve_starts_of_exact_zeros_and_symmetry(mech):
+    """A few chains of harness.testing.strategies.aligned_mechanisms (identity orientations, axes
+    and springs along coordinate axes): measured, their guards hand back no call."""
+    try:
+        _check_generated_serves(mech)
+    except AssemblyError:
+        reject()
+
+
+@pytest.mark.slow
+@settings(max_examples=24, derandomize=True, deadline=None, database=None,
+          suppress_health_check=list(HealthCheck))
+@given(mech=st.one_of(aligned_mechanisms(), mechanisms()))
+def test_generated_loops_serve_drawn_mechanisms(mech):
+    """24 drawn mechanisms, planar and spatial, random poses and starts of exact zeros, springs
+    (stiffness to 1e5 N/m), slender bars: served, or a note names why not."""
+    try:
+        _check_generated_serves(mech)
+    except AssemblyError:
+        reject()
+
+
+def test_a_slender_spatial_body_is_traced_through_the_augmented_mass_form():
+    """A spatial pendulum of two bars, one slender (no moment about its own y axis): the block
+    solve refuses its mass block, the M̃ form (Cholesky, no LAPACK) serves, and its generated
+    function returns the kernel's numbers at the start and along the run."""
+    mech = _slender_pendulum()
+    formulation, start = _formulation(mech)
+    nc, masses, inertias = formulation.dynamics.kernel_args[:3]
+    assert not dynamics._inertia_certified(masses[1], inertias[1], dynamics.ACCELERATION_CUT)
+    function = generated.compiled_function(generated.ACCELERATION, formulation, *start)
+    rng = np.random.default_rng(3)
+    for t in (0.0, 0.1, 0.2):
+        q = start[0] + 1e-3 * rng.standard_normal(start[0].size)
+        v = start[1] + rng.standard_normal(start[1].size)
+        expected = np.asarray(generated.kernel_outputs(generated.ACCELERATION, formulation, q,
+                                                       v, t))
+        out = np.empty(q.size)
+        assert _call(function, q, v, t, out) == 1
+        assert np.abs(out - expected).max() <= RELATIVE_BOUND * np.abs(expected).max()
+
+
+def _slender_pendulum():
+    """Two 1 m bars along x in the identity orientation: a revolute about z at the origin, a
+    spherical joint at (1, 0, 0); the second bar slender about y (no moment about y)."""
+    bar = {"mass": 1.0, "euler313_deg": [0.0, 0.0, 0.0]}
+    return scenario.from_document({
+        "kind": "spatial", "duration": 1.0, "gravity": [0.0, 0.0, -9.81],
+        "bodies": [{**bar, "name": "upper", "inertia": [0.01, 0.08, 0.08],
+                    "position": [0.5, 0.0, 0.0]},
+                   {**bar, "name": "lower", "inertia": [0.08, 0.0, 0.08],
+                    "position": [1.5, 0.0, 0.0]}],
+        "joints": [{"name": "pivot", "type": "revolute", "body1": "ground", "body2": "upper",
+                    "location": [0.0, 0.0, 0.0], "axis": [0.0, 0.0, 1.0]},
+                   {"name": "ball", "type": "spherical", "body1": "upper", "body2": "lower",
+                    "location": [1.0, 0.0, 0.0]}],
+        "initial": {"driver": "pivot", "value": 0.0, "rate": 1.0},
+        "outputs": {"angle": {"kind": "joint_angle", "joint": "pivot"}}},
+        "slender_pendulum", "tests/adapters/inhouse/test_generated.py")
+
+
+def _formulation(mech):
+    """The rk4+direct formulation of ``mech`` and its start (q0, q̇0)."""
+    adapter = get_adapter("inhouse")
+    spec, params = adapter.method_spec("rk4+direct:loop=compiled")
+    stepper = adapter._start(mech, spec, params, RunGrid(1e-3, 1e-3, np.zeros(1), True))
+    return stepper.formulation, stepper._start_state
+
+
+def test_the_cholesky_form_of_the_augmented_mass_solve_matches_lu():
+    """M̃ = LLᵀ with W = L⁻¹Φ_qᵀ against the LU solve of M̃ [Q, Φ_qᵀ] it replaced, on the slender
+    pendulum at its start with a random velocity.  Measured difference (2026-11-27): 3.5e-15
+    on accelerations up to 9.81; bound 1e-11 as for the block solve
+    (tests/adapters/inhouse/test_compiled_path.py)."""
+    formulation, (q, _) = _formulation(_slender_pendulum())
+    constraints = formulation.constraints
+    jacobian = constraints.jacobian(q, 0.0)
+    r = np.random.default_rng(0).normal(size=q.size)
+    v = r - np.linalg.pinv(jacobian) @ (jacobian @ r)
+    mass, force = dynamics.mass_and_forces_kernel(q, v, *formulation.dynamics.kernel_args)
+    gamma = constraints.gamma(q, v, 0.0)
+    cholesky = dynamics.augmented_mass_acceleration(mass, jacobian, force, gamma,
+                                                    dynamics.ACCELERATION_CUT)
+    rho = np.trace(mass) / np.sum(jacobian * jacobian)
+    lu = dynamics._lu_mass_acceleration(mass + rho * jacobian.T @ jacobian, jacobian, force,
+                                        gamma, dynamics.ACCELERATION_CUT)
+    assert np.abs(cholesky - lu).max() <= 1e-11
