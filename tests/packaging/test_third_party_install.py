@@ -57,7 +57,7 @@ def test_a_campaign_and_a_report_next_to_a_built_in_engine(installed):
 
 def test_a_user_test_file_asserts_on_the_toy_through_the_plugin(installed):
     bin_folder, user, env = installed
-    suite = user / "suite"
+    suite = user / "toy_suite"  # the session's user folder is shared with tests/packaging
     suite.mkdir()
     (suite / "test_my_solver.py").write_text(USER_TEST)
     done = run([bin_folder / "python", "-m", "pytest", "-q", "-p", "no:cacheprovider"], suite, env)

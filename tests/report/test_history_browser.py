@@ -12,7 +12,7 @@ import pytest
 from harness.report.history import find_changes
 from harness.report.history_page import build_history
 from tests.report.history_cases import case, history
-from tests.report.test_report_browser import CHROMIUM, LAPTOP, _chromium, _console, _page_requests
+from tests.report.browser import CHROMIUM, LAPTOP, _chromium, _console, _page_requests
 
 pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
 

@@ -28,7 +28,7 @@ from harness.run.campaign import run_campaign
 from harness.run.spec import load_campaign
 from harness.store import runs
 from harness.store.runs import RunStore, StoreError
-from tests.store.test_store import SPECS, campaign, row_for, trajectory
+from tests.store.store_cases import SPECS, campaign, row_for, trajectory
 
 CAMPAIGN = """
 calibration = false

@@ -11,7 +11,7 @@ import json
 import math
 import shutil
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -28,63 +28,10 @@ from harness.run.spec import load_campaign
 from harness.store.schema import SCHEMA_VERSION, SchemaError
 from harness.model.trajectory import Trajectory
 from tests.helpers import DATA
+from tests.store.store_cases import SPECS, campaign, row_for, trajectory
 
 V1_ROOT = DATA / "store_v1"
 V1_RUN = "20260101T000000Z-v1demo"
-
-
-@dataclass(frozen=True)
-class Spec:
-    """The CaseSpec attributes the store reads (harness.run.spec.CaseSpec has more)."""
-
-    scenario: str
-    adapter: str
-    method: str
-    dt: float
-    t_end: float
-
-    @property
-    def case_id(self) -> str:
-        return f"{self.scenario}|{self.adapter}|{self.method}|{self.dt!r}|{self.t_end!r}"
-
-
-@dataclass(frozen=True)
-class Campaign:
-    """The Campaign attributes the store reads."""
-
-    name: str
-    path: Path
-    text: str
-    cases: tuple
-
-
-SPECS = (Spec("fourbar", "mujoco", "best", 0.001, 1.0),
-         Spec("fourbar", "inhouse", "rk4+direct:proj_tol=1e-12", 0.01, 1.0),
-         Spec("slider_crank", "pybullet", "default", 0.001, 0.5),
-         Spec("slider_crank", "inhouse", "bdf4+baumgarte:alpha=5,beta=5", 0.0001, 0.5))
-
-
-def campaign(name: str = "demo") -> Campaign:
-    return Campaign(name, Path(f"campaigns/{name}.toml"), '# "<markup>" & ünïcode\n[x]\n',
-                    SPECS)
-
-
-def row_for(spec: Spec, **values) -> dict:
-    base = {"case_id": spec.case_id, "scenario": spec.scenario, "adapter": spec.adapter,
-            "method": spec.method, "dt": spec.dt, "t_end": spec.t_end, "status": "ok",
-            "reason": "", "failure_time": None, "main_output_error": 1e-6, "wall_time_s": 1.0,
-            "steps": 100}
-    return {**base, **values}
-
-
-def trajectory(n_samples: int = 3, n_bodies: int = 2, **kwargs) -> Trajectory:
-    rng = np.random.default_rng(7)
-    shape = (n_samples, n_bodies)
-    return Trajectory(times=np.linspace(0.0, 0.02, n_samples),
-                      position=rng.normal(size=(*shape, 3)),
-                      quaternion=rng.normal(size=(*shape, 4)),
-                      velocity=rng.normal(size=(*shape, 3)),
-                      angular_velocity=rng.normal(size=(*shape, 3)), **kwargs)
 
 
 @pytest.fixture

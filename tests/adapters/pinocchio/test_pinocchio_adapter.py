@@ -32,6 +32,7 @@ ADAPTER = get_adapter("pinocchio")
 #: Cut joints, notes and number of joint velocities of every shipped scenario (closure costs:
 #: spherical 3, planar revolute 3, spatial revolute 6, slides and universal joints not closable).
 EXPECTED_TREES = {
+    "simple_pendulum": ((), [], 1),
     "fourbar": (("B",), ["1 redundant closure equation(s)"], 3),
     "fourbar_spatial": (("B",), [], 4),
     "slider_crank": (("A",), [], 4),
