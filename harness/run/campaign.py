@@ -200,10 +200,14 @@ class _Recorder:
 
 
 def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
-    from adapters import get_adapter
+    """Content hashes of the scenarios and versions of the adapters (for an adapter that cannot
+    be loaded, the reason: its cases become rows that say so)."""
+    from adapters import version_or_problem
 
     keys = {name: scenario.load(name).content_hash for name in names}
-    keys.update({name: get_adapter(name).version() for name in adapters})
+    for name in adapters:
+        version, problem = version_or_problem(name)
+        keys[name] = version or problem
     return keys
 
 
@@ -333,8 +337,8 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
                 progress=not quiet)
         if campaign.sweep is not None:
             _sweep(campaign, store, work, workers, backend, quiet)
+        store.finish("complete")  # a stop while it writes leaves the run interrupted, not running
     except KeyboardInterrupt as stop:
         store.finish("interrupted")
         raise CampaignInterrupted(store, getattr(stop, "signum", signal.SIGINT)) from None
-    store.finish("complete")
     return store

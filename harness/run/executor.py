@@ -31,9 +31,15 @@ Two backends hand cases to :func:`run_isolated`:
   How many cases run at once is the cluster's thread count: give it one thread per core.
 
 Results are handed to ``on_result`` in the calling process as they finish (the caller stores
-them).  Ctrl-C (KeyboardInterrupt) stops submitting, kills the running local children (Dask tasks
-are cancelled; a case already running on a cluster finishes there and is discarded), and is
-re-raised after every finished case has been handed over.
+them).  Ctrl-C (KeyboardInterrupt, and the stop signals the campaign turns into one) stops
+submitting, kills the running children and is re-raised after every finished case has been handed
+over.  Locally the children are killed through :class:`WorkerProcesses`.  On Dask the waiting
+tasks are cancelled and every Dask worker is asked (``Client.run``, outside the task queue) to
+kill the children of this execution's running tasks: each task registers its child under the
+execution's id in its Dask worker process (:func:`_dask_case`), so a stop reaches exactly this
+execution's cases, never another client's.  Dask itself cannot interrupt a running task; killing
+its child ends the task at once (its ``crashed`` row is discarded).  A client killed by SIGKILL
+cannot ask: the cases then running on the cluster finish there and their results are dropped.
 """
 
 from __future__ import annotations
@@ -50,6 +56,7 @@ import sys
 import tempfile
 import threading
 import traceback
+import uuid
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
@@ -75,6 +82,17 @@ class _Stopped(Exception):
 
 # --- dying with the parent ------------------------------------------------------------------
 
+# Why the kernel's parent-death signal and not process-group supervision: each worker has a
+# process group of its own (so a timeout kills everything the case started, and Ctrl-C at a
+# terminal reaches the campaign, not the engines), so killing "the campaign's group" cannot reach
+# it; and a supervisor process that kills the workers when the campaign dies is one more process
+# that SIGKILL can take down too.  PR_SET_PDEATHSIG is delivered by the kernel itself, whatever
+# killed the parent.  It fires when the *thread* that started the worker ends: a cold worker's
+# starting thread waits for it (run_isolated), a warm worker's is the fork server's only thread,
+# so neither ends before its worker unless its process dies.  The check after the request closes
+# the race with a parent that died first; an orphan adopted by a subreaper other than init (a
+# ``systemd --user`` session) escapes the ``parent is None`` check, for the instant between its
+# fork and the request.
 _PR_SET_PDEATHSIG = 1
 
 
@@ -406,12 +424,44 @@ def _run_local(specs, limits, work, workers, failure_row, finished, warm) -> Non
     pool.shutdown()
 
 
+#: The worker registries of the Dask executions whose tasks run in this process (a Dask worker),
+#: by execution id: where :func:`_end_dask_execution` finds the children to kill.
+_DASK_EXECUTIONS: dict[str, WorkerProcesses] = {}
+_DASK_EXECUTIONS_LOCK = threading.Lock()
+
+
+def _dask_case(execution: str, work: Callable, spec, timeout_s: float, failure_row: Callable):
+    """A Dask task: :func:`run_isolated` with the child registered under ``execution`` in this
+    Dask worker process; a case of an execution already stopped gets a ``crashed`` row (which
+    its cancelled future drops) instead of a child."""
+    with _DASK_EXECUTIONS_LOCK:
+        workers = _DASK_EXECUTIONS.setdefault(execution, WorkerProcesses(warm=False))
+    try:
+        return run_isolated(work, spec, timeout_s, failure_row, workers)
+    except _Stopped:
+        return failure_row(spec, "crashed", "the campaign stopped before the case started"), None
+
+
+def _end_dask_execution(execution: str, stop: bool) -> None:
+    """Run in every Dask worker process (``Client.run``) when an execution ends: with ``stop``,
+    kill its running children and refuse its later tasks (the closed registry stays, so a task
+    the cancel did not reach in time starts nothing); else forget its registry."""
+    with _DASK_EXECUTIONS_LOCK:
+        if not stop:
+            _DASK_EXECUTIONS.pop(execution, None)
+            return
+        workers = _DASK_EXECUTIONS.setdefault(execution, WorkerProcesses(warm=False))
+    workers.close()
+
+
 def _run_dask(specs, limits, work, scheduler, failure_row, finished) -> None:
     from distributed import Client, KilledWorker
     from distributed import as_completed as dask_completed
 
+    execution = uuid.uuid4().hex
     with Client(scheduler) as client:
-        futures = {client.submit(run_isolated, work, spec, limit, failure_row, pure=False): spec
+        futures = {client.submit(_dask_case, execution, work, spec, limit, failure_row,
+                                 pure=False): spec
                    for spec, limit in zip(specs, limits)}
         try:
             for future in dask_completed(futures):
@@ -423,7 +473,9 @@ def _run_dask(specs, limits, work, scheduler, failure_row, finished) -> None:
                 finished(spec, row, trajectory)
         except BaseException:
             client.cancel(list(futures))
+            client.run(_end_dask_execution, execution, True, on_error="ignore")
             raise
+        client.run(_end_dask_execution, execution, False, on_error="ignore")
 
 
 if __name__ == "__main__":
