@@ -11,12 +11,30 @@ fill (compiled code, loaded references) holds what a cold worker computes or loa
 
 from __future__ import annotations
 
+import multiprocessing.spawn
 import os
 
 from harness.run.executor import WORKER_ENV
 
 # Before numpy and the engines load their thread pools: one thread per case.
 os.environ.update(WORKER_ENV)
+
+#: The parts of multiprocessing's child preparation that re-run the starting process's main
+#: module in the child: a user's script, or ``harness.cli``.  A case's process never needs it (its
+#: work and spec are importable by name, as a cold worker needs them), and a script that starts a
+#: campaign at its top level, without ``if __name__ == "__main__":``, would start the campaign
+#: again in every case's process, which multiprocessing refuses (every case ``crashed``).
+MAIN_MODULE_KEYS = ("init_main_from_name", "init_main_from_path")
+_prepare = multiprocessing.spawn.prepare
+
+
+def _prepare_without_main(data: dict) -> None:
+    """multiprocessing's child preparation (sys.path, working folder, …) without
+    :data:`MAIN_MODULE_KEYS`; installed in this template only, whose children are cases."""
+    _prepare({key: value for key, value in data.items() if key not in MAIN_MODULE_KEYS})
+
+
+multiprocessing.spawn.prepare = _prepare_without_main
 
 #: (scenario, adapter, method, dt, t_end) run once in the template, their results discarded: the
 #: planar and spatial in-house paths (default and best methods, which load most kernels) and an
