@@ -78,11 +78,19 @@ def kernel_sources() -> list[Path]:
 
 
 @functools.cache
+def kernel_fingerprint() -> str:
+    """:func:`fingerprint` of :func:`kernel_sources`: names this code's compiled kernels and
+    everything computed from them (a trace of the generated functions).  Computed once per
+    process."""
+    return fingerprint(kernel_sources())
+
+
+@functools.cache
 def kernel_folder() -> Path:
-    """This code's folder of compiled kernels: ``numba/<fingerprint of kernel_sources()>`` in the
-    user cache (else in the temporary directory), marked used; older folders beyond :data:`KEEP`
-    are removed.  Computed once per process."""
-    name = fingerprint(kernel_sources())
+    """This code's folder of compiled kernels: ``numba/<kernel_fingerprint()>`` in the user cache
+    (else in the temporary directory), marked used; older folders beyond :data:`KEEP` are
+    removed.  Computed once per process."""
+    name = kernel_fingerprint()
     user = os.getuid() if hasattr(os, "getuid") else "user"  # a per-user temporary directory
     for root in (user_cache() / "numba", Path(tempfile.gettempdir()) / f"mbh-{user}" / "numba"):
         folder = root / name

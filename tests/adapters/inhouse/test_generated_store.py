@@ -4,9 +4,11 @@ first; the bound's setting is checked."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import sys
 import uuid
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -53,14 +55,32 @@ def test_an_entry_is_compiled_once_then_loaded(store):
     assert {path: path.stat().st_mtime_ns for path in _numba_files(name)} == written  # loaded
 
 
+def test_an_entry_keeps_its_bytecode_even_where_python_writes_none(store, monkeypatch):
+    """A long source is compiled to bytecode once, not at every import."""
+    monkeypatch.setattr(sys, "dont_write_bytecode", True)
+    name = f"mbh_test_{uuid.uuid4().hex}"
+    _fresh_load(name)
+    bytecode = _bytecode(name)
+    written = bytecode.stat().st_mtime_ns
+    assert _result(_fresh_load(name)) == 2.75
+    assert bytecode.stat().st_mtime_ns == written
+
+
+def _bytecode(name: str):
+    return Path(importlib.util.cache_from_source(
+        str(generated_store.entry_folder(name) / f"{name}.py")))
+
+
 @pytest.mark.parametrize("damage", ["source cut short", "source garbled", "index garbage",
-                                    "data garbage", "index cut short", "data emptied"])
+                                    "data garbage", "index cut short", "data emptied",
+                                    "bytecode garbage", "bytecode cut short"])
 def test_a_damaged_entry_is_rebuilt(store, damage):
     name = f"mbh_test_{uuid.uuid4().hex}"
     _fresh_load(name)
     source = generated_store.entry_folder(name) / f"{name}.py"
     index, data = (next(path for path in _numba_files(name) if path.suffix == suffix)
                    for suffix in (".nbi", ".nbc"))
+    good_bytecode = _bytecode(name).read_bytes()
     target, content = {
         "source cut short": (source, SOURCE.encode()[:len(SOURCE) // 2]),
         "source garbled": (source, b"\xff\xfe" + SOURCE.encode()[2:]),
@@ -68,10 +88,13 @@ def test_a_damaged_entry_is_rebuilt(store, damage):
         "data garbage": (data, os.urandom(3000)),
         "index cut short": (index, index.read_bytes()[:40]),
         "data emptied": (data, b""),
+        "bytecode garbage": (_bytecode(name), os.urandom(500)),
+        "bytecode cut short": (_bytecode(name), _bytecode(name).read_bytes()[:30]),
     }[damage]
     target.write_bytes(content)
     assert _result(_fresh_load(name)) == 2.75
     assert source.read_text() == SOURCE and len(_numba_files(name)) == 2
+    assert _bytecode(name).read_bytes() == good_bytecode
 
 
 def test_a_half_written_file_of_another_process_is_ignored(store):
