@@ -209,7 +209,7 @@ def test_a_stopped_run_resumes_to_the_rows_of_an_uninterrupted_run(tmp_path, bas
     assert set(rows.index) == ids  # none lost
     assert len(list((root / manifest["run_id"] / "cases").glob("part-*.parquet"))) == len(ids)
     crashed = rows.index[rows["status"] == "crashed"]
-    assert len(crashed) == int(killed_worker)
+    assert len(crashed) == int(killed_worker), (rows.loc[crashed, "reason"].to_dict(), err)
     assert rows.loc[crashed, "reason"].str.startswith("worker process killed by SIGKILL").all()
     kept = rows.index.difference(crashed)
     pd.testing.assert_frame_equal(rows.loc[kept], baseline.rows.loc[kept], check_exact=True)
