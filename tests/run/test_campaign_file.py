@@ -256,3 +256,16 @@ def test_engine_table_is_every_default_and_best():
 
 def test_shipped_campaigns_are_listed():
     assert {"smoke", "nightly", "engine_table"} <= set(campaign.campaign_names())
+
+
+@pytest.mark.parametrize("name", campaign.campaign_names())
+def test_every_shipped_campaign_loads(name):
+    """A shipped campaign that does not validate fails its command at once (``mbh bench`` did:
+    its fronts gave Andrews' squeezer steps that do not divide its 1 ms grid)."""
+    assert load_campaign(name).cases
+
+
+def test_the_bench_campaign_covers_every_shipped_scene_and_adapter():
+    cases = load_campaign("bench").cases
+    assert {case.scenario for case in cases} == set(scenario.scenario_names())
+    assert {case.adapter for case in cases} == set(adapter_names())
