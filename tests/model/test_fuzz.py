@@ -20,14 +20,11 @@ import copy
 import io
 import json
 import math
-import re
-import tempfile
 import tomllib
 from pathlib import Path
 
-import numpy as np
 import pytest
-from hypothesis import HealthCheck, event, example, given, settings
+from hypothesis import event, example, given, settings
 from hypothesis import strategies as st
 
 from harness import cli
@@ -35,92 +32,27 @@ from harness import cli
 from harness.model import scenario
 from harness.model.mechanism import GROUND, Mechanism
 from harness.model.scenario import ScenarioError
+from tests.fuzzing import (BASE, NAMES, NUMBERS, SCENARIO_DOCUMENTS, SCENARIO_KEYS, VALUES,
+                           VECTORS, assert_clean_mechanism, finite_numbers, fuzzed_file,
+                           toml_document)
 
 DEFAULT_EXAMPLES = 400
 SIMULATE_EXAMPLES = 150
 SLOW_EXAMPLES = 3000
 SIMULATE_SLOW_EXAMPLES = 1000
 
-DEFAULT = settings(max_examples=DEFAULT_EXAMPLES, derandomize=True, deadline=None, database=None,
-                   suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+DEFAULT = settings(BASE, max_examples=DEFAULT_EXAMPLES)
 SLOW = settings(DEFAULT, max_examples=SLOW_EXAMPLES, derandomize=False)
 SIMULATE = settings(DEFAULT, max_examples=SIMULATE_EXAMPLES)
 SIMULATE_SLOW = settings(SLOW, max_examples=SIMULATE_SLOW_EXAMPLES)
 
-BASES = {name: tomllib.loads(scenario.scenario_path(name).read_text(encoding="utf-8"))
-         for name in scenario.scenario_names()}
-
-# -- a tiny TOML writer (no dependency): every value inline, every table an inline table --------
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-
-
-def toml_string(text: str) -> str:
-    """A TOML basic string: JSON's escapes are TOML's, except that TOML also escapes DEL."""
-    return json.dumps(text, ensure_ascii=False).replace("\x7f", "\\u007f")
-
-
-def toml_key(key: str) -> str:
-    return key if _BARE_KEY.match(key) else toml_string(key)
-
-
-def toml_value(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        if math.isnan(value):
-            return "nan"
-        if math.isinf(value):
-            return "inf" if value > 0 else "-inf"
-        return repr(value)
-    if isinstance(value, str):
-        return toml_string(value)
-    if isinstance(value, list):
-        return "[" + ", ".join(toml_value(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{toml_key(k)} = {toml_value(v)}" for k, v in value.items()) + "}"
-    raise TypeError(f"no TOML for {type(value).__name__}")
-
-
-def toml_document(document: dict) -> str:
-    return "".join(f"{toml_key(k)} = {toml_value(v)}\n" for k, v in document.items())
-
 
 def test_the_writer_round_trips_every_shipped_scenario():
-    for name, document in BASES.items():
+    for name, document in SCENARIO_DOCUMENTS.items():
         assert tomllib.loads(toml_document(document)) == document, name
 
 
-# -- evil values --------------------------------------------------------------------------------
-NAMES = st.sampled_from([
-    "", " ", "ground", "<script>alert(1)</script>", "\u202eevil\u202c", "crank\u200b", "🦀", "名前",
-    "a\nb", "a\"b", "x" * 300, "\x00", "\x7f", "𝔠𝔯𝔞𝔫𝔨", "../../etc/passwd", "${HOME}", "%s%n",
-])
-NUMBERS = st.sampled_from([
-    math.nan, math.inf, -math.inf, 0, 0.0, -0.0, 1e308, -1e308, 1e-308, 5e-324, 1e-300, 1e300,
-    -1.0, 1, 2**63 - 1, -(2**63), 1e-12, 1e12,
-])
-VECTORS = st.one_of(
-    st.lists(NUMBERS, min_size=3, max_size=3),
-    st.sampled_from([[0.0, 0.0, 0.0], [1e-300, 0.0, 0.0], [1e308, 1e308, 0.0],
-                     [1e200, 1e200, 1e200],
-                     [], [1.0], [1.0, 2.0], [1.0, 2.0, 3.0, 4.0], [[1.0], [2.0], [3.0]],
-                     [1.0, "2", 3.0], [True, False, True], [1, 0, 0], [0.0, 0.0, 1.0],
-                     [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]]),
-)
-VALUES = st.one_of(NUMBERS, NAMES, VECTORS, st.booleans(),
-                   st.sampled_from([{}, {"a": 1}, [{}], [{"name": "x"}], "revolute", "spherical",
-                                    "universal", "prismatic", "x", "y", "z", "w"]))
-KEYS = st.sampled_from([
-    "name", "kind", "plane", "duration", "gravity", "mass", "inertia", "position", "angle_deg",
-    "euler313_deg", "quaternion", "type", "body1", "body2", "location", "location2", "axis",
-    "axis2", "normal", "joint", "value", "rate", "driver", "guess", "velocities", "body",
-    "velocity", "components", "component", "force", "point", "torque", "stiffness", "damping",
-    "free_length", "location1", "outputs", "initial", "bodies", "joints", "forces", "unknown",
-])
-
-
+# -- mutations ----------------------------------------------------------------------------------
 def tables(document: dict) -> list[dict]:
     """Every table of the document a mutation may touch (the document itself first)."""
     found = [document]
@@ -166,7 +98,7 @@ def mutated(draw) -> dict:
     into the document: strategies such as ``sampled_from`` hand out the same list or dict
     object each time, and a later mutation that changes it in place would change what the
     strategy draws in the next example (Hypothesis then fails the test as flaky; seen in CI)."""
-    document = copy.deepcopy(BASES[draw(st.sampled_from(sorted(BASES)))])
+    document = copy.deepcopy(SCENARIO_DOCUMENTS[draw(st.sampled_from(sorted(SCENARIO_DOCUMENTS)))])
     for _ in range(draw(st.sampled_from([1, 1, 1, 2, 3]))):
         kind = draw(st.sampled_from(MUTATIONS))
         table = draw(st.sampled_from(tables(document)))
@@ -176,7 +108,7 @@ def mutated(draw) -> dict:
             container[key] = draw(NUMBERS)
         elif kind == "set":  # mostly a field the table has, with a value of its type
             own_key = table and draw(st.integers(0, 3)) > 0
-            key = draw(st.sampled_from(sorted(table)) if own_key else KEYS)
+            key = draw(st.sampled_from(sorted(table)) if own_key else SCENARIO_KEYS)
             table[key] = copy.deepcopy(draw(evil_like(table.get(key))))
         elif kind == "delete" and table:
             del table[draw(st.sampled_from(sorted(table)))]
@@ -276,7 +208,7 @@ def velocity_entry(bodies: list[str], joints: list[str]):
         {"body": body, "location": st.one_of(PLAIN_VECTORS, VECTORS),
          "velocity": st.one_of(PLAIN_VECTORS, VECTORS)},
         optional={"components": COMPONENTS})
-    return st.one_of(joint_rate, point, st.dictionaries(KEYS, VALUES, max_size=4))
+    return st.one_of(joint_rate, point, st.dictionaries(SCENARIO_KEYS, VALUES, max_size=4))
 
 
 def output_entry(bodies: list[str]):
@@ -302,31 +234,6 @@ def scenario_text(draw) -> str:
 
 
 # -- the oracles ---------------------------------------------------------------------------------
-@contextlib.contextmanager
-def scenario_file(text: str):
-    """The text in ``<fresh tmp dir>/fuzzed.toml``, removed afterwards (Hypothesis examples cannot
-    share pytest's function-scoped tmp_path)."""
-    with tempfile.TemporaryDirectory(prefix="mbh-fuzz-") as folder:
-        path = Path(folder) / "fuzzed.toml"
-        path.write_bytes(text.encode("utf-8", errors="surrogatepass"))  # lone surrogates: bad UTF-8
-        yield path
-
-
-def finite_numbers(value) -> bool:
-    """True when every number inside ``value`` (dataclasses, arrays, containers) is finite."""
-    if isinstance(value, np.ndarray):
-        return bool(np.all(np.isfinite(value)))
-    if isinstance(value, float):
-        return math.isfinite(value)
-    if isinstance(value, (list, tuple)):
-        return all(finite_numbers(v) for v in value)
-    if isinstance(value, dict):
-        return all(finite_numbers(v) for v in value.values())
-    if hasattr(value, "__dataclass_fields__"):
-        return all(finite_numbers(getattr(value, f)) for f in value.__dataclass_fields__)
-    return True
-
-
 #: How ``--json`` encodes a non-finite number (harness/common/jsonout.py).
 NON_FINITE_STRINGS = {"NaN", "Infinity", "-Infinity"}
 
@@ -347,20 +254,6 @@ def finite_json(value) -> bool:
     if isinstance(value, dict):
         return all(finite_json(v) for v in value.values())
     return finite_numbers(value)
-
-
-def assert_clean_mechanism(mech: Mechanism) -> None:
-    """All numbers finite, masses positive, rotations orthonormal, joint directions unit.
-
-    The 1e-12 bounds hold round-off of one normalisation or rotation product (~1e-16) with room.
-    """
-    assert finite_numbers(mech), "a loaded mechanism holds a non-finite number"
-    for body in mech.bodies:
-        assert body.mass > 0
-        assert np.allclose(body.rotation.T @ body.rotation, np.eye(3), atol=1e-12)
-    for joint in mech.joints:
-        for axis in (joint.axis1, joint.axis2, joint.normal1, joint.normal2):
-            assert abs(np.linalg.norm(axis) - 1.0) < 1e-12, f"joint {joint.name}: axis not unit"
 
 
 def assert_clear_error(error: ScenarioError, path: Path) -> None:
@@ -403,7 +296,7 @@ def assert_refused(path: Path, status: int, out: str, err: str) -> None:
 def check_file(text: str) -> None:
     """``mbh check FILE --json``: a bad file is refused; a valid one gives one JSON row, with an
     ``error`` (exit 1) exactly when the assembly refuses it."""
-    with scenario_file(text) as path:
+    with fuzzed_file(text) as path:
         valid = load_or_clear_error(path) is not None
         status, out, err = run_cli(["check", str(path), "--json"])
         if not valid:
@@ -420,7 +313,7 @@ def check_file(text: str) -> None:
 # Found (slow profile): an unknown empty key was reported with an empty field ("file: : unknown").
 @example(text='"" = "planar"\n')
 def test_loader_gives_a_clean_mechanism_or_one_clear_error(text):
-    with scenario_file(text) as path:
+    with fuzzed_file(text) as path:
         load_or_clear_error(path)
 
 
@@ -428,13 +321,13 @@ def test_loader_gives_a_clean_mechanism_or_one_clear_error(text):
 @SLOW
 @given(text=scenario_text())
 def test_loader_fuzz_large(text):
-    with scenario_file(text) as path:
+    with fuzzed_file(text) as path:
         load_or_clear_error(path)
 
 
 def with_axis(name: str, joint: int, axis: list) -> str:
     """Shipped scenario ``name`` with joint ``joint``'s axis replaced."""
-    document = copy.deepcopy(BASES[name])
+    document = copy.deepcopy(SCENARIO_DOCUMENTS[name])
     document["joints"][joint]["axis"] = axis
     return toml_document(document)
 
@@ -462,14 +355,14 @@ STEPS = st.one_of(st.sampled_from([1e-3, 2e-3, 1e-2]),
                                    5e-324, 3.3e-3, 0.05]))
 ENDS = st.one_of(st.sampled_from([0.01, 0.02]),
                  st.sampled_from([0.0, -1.0, math.nan, math.inf, 1e300, 5e-324]))
-SIMULATE_INPUTS = dict(document=st.one_of(mutated(), st.sampled_from(sorted(BASES)).map(BASES.get)),
+SIMULATE_INPUTS = dict(document=st.one_of(mutated(), st.sampled_from(sorted(SCENARIO_DOCUMENTS)).map(SCENARIO_DOCUMENTS.get)),
                        dt=STEPS, t_end=ENDS)
 
 
 def simulate_file(document: dict, dt: float, t_end: float) -> None:
     """``mbh simulate FILE --dt DT --t-end T --json``: a bad file or step is refused (exit 2,
     stderr); otherwise one JSON result whose numbers are all finite if its status is ``ok``."""
-    with scenario_file(toml_document(document)) as path:
+    with fuzzed_file(toml_document(document)) as path:
         valid = load_or_clear_error(path) is not None
         status, out, err = run_cli(["simulate", str(path), "--adapter", "inhouse", "--method",
                                     "default", f"--dt={dt!r}", f"--t-end={t_end!r}",
@@ -493,7 +386,7 @@ def simulate_file(document: dict, dt: float, t_end: float) -> None:
 @SIMULATE
 @given(**SIMULATE_INPUTS)
 # Found: a subnormal step overflowed the steps-per-sample ratio (OverflowError in sampling.py).
-@example(document=BASES["fourbar"], dt=5e-324, t_end=5e-324)
+@example(document=SCENARIO_DOCUMENTS["fourbar"], dt=5e-324, t_end=5e-324)
 def test_cli_simulate_gives_a_finite_result_or_one_clear_error(document, dt, t_end):
     simulate_file(document, dt, t_end)
 

@@ -27,14 +27,14 @@ from hypothesis import strategies as st
 
 from harness.model.builder import MAX_DEPTH, MechanismBuilder
 from harness.model.scenario import ScenarioError
-from tests.model.test_fuzz import (BASES, DEFAULT, KEYS, NAMES, NUMBERS, VALUES, VECTORS,
-                                   assert_clean_mechanism)
+from tests.fuzzing import (BASE, NAMES, NUMBERS, SCENARIO_DOCUMENTS, SCENARIO_KEYS, VALUES,
+                           VECTORS, assert_clean_mechanism)
 
 DEFAULT_EXAMPLES = 300
 SLOW_EXAMPLES = 3000
 
-BUILDER_DEFAULT = settings(DEFAULT, max_examples=DEFAULT_EXAMPLES)
-BUILDER_SLOW = settings(DEFAULT, max_examples=SLOW_EXAMPLES, derandomize=False)
+BUILDER_DEFAULT = settings(BASE, max_examples=DEFAULT_EXAMPLES)
+BUILDER_SLOW = settings(BASE, max_examples=SLOW_EXAMPLES, derandomize=False)
 
 SECTIONS = ("body", "joint", "force", "initial", "output", "reference")
 
@@ -161,14 +161,14 @@ MUTATIONS = ["set"] * 6 + ["arrays"] * 2 + ["call"] * 2 + ["delete", "drop", "re
 @st.composite
 def builder_calls(draw) -> list[list]:
     """A shipped scenario as builder calls, with one to four mutations."""
-    calls = calls_of(copy.deepcopy(BASES[draw(st.sampled_from(sorted(BASES)))]))
+    calls = calls_of(copy.deepcopy(SCENARIO_DOCUMENTS[draw(st.sampled_from(sorted(SCENARIO_DOCUMENTS)))]))
     for _ in range(draw(st.sampled_from([1, 1, 2, 3, 4]))):
         kind = draw(st.sampled_from(MUTATIONS))
         call = draw(st.sampled_from(calls))
         fields = call[2]
         if kind == "set":
             own = fields and draw(st.integers(0, 3)) > 0
-            key = draw(st.sampled_from(sorted(fields)) if own else KEYS)
+            key = draw(st.sampled_from(sorted(fields)) if own else SCENARIO_KEYS)
             fields[key] = realised(draw(PYTHON_VALUES))
         elif kind == "arrays":  # every list of numbers of the call as a numpy array
             dtype = draw(st.sampled_from(["float64", "float32", "int64", "object"]))
@@ -183,7 +183,7 @@ def builder_calls(draw) -> list[list]:
             method = draw(st.sampled_from(SECTIONS))
             arity = {"body": 1, "joint": 2, "force": 1, "output": 2}.get(method, 0)
             args = [realised(draw(st.one_of(NAMES, PYTHON_VALUES))) for _ in range(arity)]
-            extra = draw(st.dictionaries(KEYS, PYTHON_VALUES, max_size=4))
+            extra = draw(st.dictionaries(SCENARIO_KEYS, PYTHON_VALUES, max_size=4))
             calls.append([method, args, {k: realised(v) for k, v in extra.items()}])
         elif kind == "delete" and fields:
             del fields[draw(st.sampled_from(sorted(fields)))]
@@ -215,7 +215,7 @@ def build_or_clear_error(calls: list[list]) -> None:
 
 
 def fourbar_with(method: str, args: list, fields: dict) -> list[list]:
-    return calls_of(copy.deepcopy(BASES["fourbar"])) + [[method, args, fields]]
+    return calls_of(copy.deepcopy(SCENARIO_DOCUMENTS["fourbar"])) + [[method, args, fields]]
 
 
 @BUILDER_DEFAULT
@@ -251,7 +251,7 @@ def test_builder_fuzz_large(calls):
 
 
 def test_the_calls_rebuild_every_shipped_scenario():
-    for name, document in BASES.items():
+    for name, document in SCENARIO_DOCUMENTS.items():
         built = make(calls_of(copy.deepcopy(document))).document()
         assert built == {k: v for k, v in document.items() if k != "name"}, name
 

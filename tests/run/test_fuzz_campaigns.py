@@ -25,19 +25,17 @@ from hypothesis import strategies as st
 from adapters import adapter_names
 from harness.model.scenario import scenario_names
 from harness.run.spec import Campaign, CampaignError, campaign_names, campaign_path, load_campaign
-from tests.model.test_fuzz import DEFAULT, NAMES, NUMBERS, VALUES, scenario_file, toml_document
+from tests.fuzzing import BASE, BREAKS, HUGE, NAMES, NUMBERS, VALUES, fuzzed_file, toml_document
 
 DEFAULT_EXAMPLES = 200
 SLOW_EXAMPLES = 2000
 
-CAMPAIGN_DEFAULT = settings(DEFAULT, max_examples=DEFAULT_EXAMPLES)
-CAMPAIGN_SLOW = settings(DEFAULT, max_examples=SLOW_EXAMPLES, derandomize=False)
+CAMPAIGN_DEFAULT = settings(BASE, max_examples=DEFAULT_EXAMPLES)
+CAMPAIGN_SLOW = settings(BASE, max_examples=SLOW_EXAMPLES, derandomize=False)
 
 BASES = {name: tomllib.loads(campaign_path(name).read_text(encoding="utf-8"))
          for name in campaign_names()}
 
-#: Integers TOML reads but no double holds, and the largest a double holds.
-HUGE = st.sampled_from([10**400, -(10**400), 2**1024, 2**1023])
 SCENES = st.sampled_from(scenario_names() + [
     "n_fourbar@3", "n_fourbar@0", "n_fourbar@257", "n_fourbar@03", "n_fourbar@x", "n_fourbar@",
     "n_fourbar@" + "9" * 5000, "nope@1", "@", "all", "*", "fourbar.toml", "../fourbar.toml",
@@ -129,9 +127,6 @@ def mutated(draw) -> dict:
 
 #: Text breakage: TOML syntax, bad UTF-8, an integer tomllib refuses to convert, arrays nested
 #: deeper than tomllib can recurse.
-BREAKS = st.sampled_from(["", "=", "[", "]", "{", '"', "\n", "\\", "\x00", "\ud800", "é",
-                          "[[group]]\n", "\nx = " + "9" * 5000 + "\n",
-                          "\nx = " + "[" * 600 + "]" * 600 + "\n"])
 
 
 @st.composite
@@ -162,7 +157,7 @@ def assert_usable(loaded: Campaign) -> None:
 
 
 def load_or_clear_error(text: str) -> None:
-    with scenario_file(text) as path:
+    with fuzzed_file(text) as path:
         try:
             loaded = load_campaign(path)
         except CampaignError as error:

@@ -25,14 +25,13 @@ from harness.run.spec import CaseSpec
 from harness.testing.cases import ToleranceError
 from harness.testing.tolerances import CaseTolerance, Tolerances
 from tests.helpers import ROOT
-from tests.model.test_fuzz import DEFAULT, NAMES, NUMBERS, VALUES, scenario_file, toml_document
-from tests.run.test_fuzz_campaigns import BREAKS, HUGE
+from tests.fuzzing import BASE, BREAKS, HUGE, NAMES, NUMBERS, VALUES, fuzzed_file, toml_document
 
 DEFAULT_EXAMPLES = 300
 SLOW_EXAMPLES = 3000
 
-TOLERANCE_DEFAULT = settings(DEFAULT, max_examples=DEFAULT_EXAMPLES)
-TOLERANCE_SLOW = settings(DEFAULT, max_examples=SLOW_EXAMPLES, derandomize=False)
+TOLERANCE_DEFAULT = settings(BASE, max_examples=DEFAULT_EXAMPLES)
+TOLERANCE_SLOW = settings(BASE, max_examples=SLOW_EXAMPLES, derandomize=False)
 
 DOCUMENTED = """
 [fourbar.inhouse."rk4+direct"]
@@ -140,7 +139,7 @@ def assert_clear(error: ToleranceError, path) -> None:
 
 
 def load_or_clear_error(text: str) -> None:
-    with scenario_file(text) as path:
+    with fuzzed_file(text) as path:
         try:
             tolerances = Tolerances(path)
         except ToleranceError as error:
