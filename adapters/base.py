@@ -38,6 +38,7 @@ measured around the stepping only (``Stepper._step_to``); the time spent reading
 from __future__ import annotations
 
 import abc
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -58,6 +59,26 @@ GRID_RTOL = 1e-9
 #: that joint at all; it is large, so a spanning tree
 #: (:func:`harness.model.topology.spanning_tree`) cuts such a joint only when it must.
 UNCLOSABLE = 1000
+
+
+def steps_in(dt: float, t_end: float) -> int:
+    """Number of steps of size ``dt`` (s, > 0) that make the duration ``t_end`` (s).
+
+    Raises
+    ------
+    ValueError
+        When ``t_end`` is not an integer multiple of ``dt`` (to :data:`GRID_RTOL`), or holds more
+        steps than a double counts; the message names both.
+    """
+    ratio = t_end / dt
+    if not math.isfinite(ratio):  # a step near the double's smallest
+        raise ValueError(f"step {dt!r} s is too small: the duration {t_end!r} s holds more steps "
+                         f"than a double counts")
+    count = round(ratio)
+    if count < 1 or abs(t_end - count * dt) > GRID_RTOL * max(t_end, dt):
+        raise ValueError(f"step {dt!r} s does not divide the duration {t_end!r} s: t_end must be "
+                         f"an integer multiple of dt")
+    return count
 
 
 class UnsupportedCase(Exception):

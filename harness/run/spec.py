@@ -13,13 +13,12 @@ The file format (keys, defaults, the rules checked, expansion order, an example)
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 from adapters import AdapterLoadError, adapter_names, get_adapter
-from adapters.base import GRID_RTOL, Adapter
+from adapters.base import Adapter, steps_in
 from harness.model import scenario
 from harness.model.mechanism import Mechanism
 from harness.model.timegrid import steps_per_sample
@@ -475,16 +474,12 @@ class _Reader:
                    mech.duration)
 
     def _divides(self, dt: float, duration: float, field: str, name: str) -> bool:
-        if not math.isfinite(duration / dt):  # a step near the double's smallest
-            self.c.add(field, f"step {dt!r} s is too small: the duration {duration!r} s of "
-                       f"scenario {name!r} holds more steps than a double counts")
+        try:
+            steps_in(dt, duration)
+        except ValueError as error:
+            self.c.add(field, f"scenario {name!r}: {error}")
             return False
-        count = round(duration / dt)
-        if count >= 1 and abs(duration - count * dt) <= GRID_RTOL * max(duration, dt):
-            return True
-        self.c.add(field, f"step {dt!r} s does not divide the duration {duration!r} s of "
-                   f"scenario {name!r} (t_end must be an integer multiple of dt)")
-        return False
+        return True
 
     def _samples(self, dt: float, mech: Mechanism, field: str) -> bool:
         """Whether ``dt`` divides the scene's own evaluation step (``sample_step``)."""

@@ -16,7 +16,7 @@ def test_every_bad_argument_is_named_at_once():
     assert named == ["method", "t_end", "repetitions"]
     with pytest.raises(CaseInputError, match="adapter: unknown adapter 'nobody'"):
         run_one("fourbar", "nobody")
-    with pytest.raises(CaseInputError, match="dt: step 0.002 s does not divide t_end = 0.005 s"):
+    with pytest.raises(CaseInputError, match="dt: step 0.002 s does not divide the duration 0.005 s"):
         run_one("fourbar", "mujoco", dt=2e-3, t_end=0.005)
 
 
