@@ -317,6 +317,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
         workers = timed_workers(workers, say)
     else:
         check_scheduler(scheduler)
+    RunStore.check_writable(root)  # before references are built: that can take minutes
     names = {spec.scenario for spec in campaign.cases}
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)

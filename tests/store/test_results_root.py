@@ -149,6 +149,29 @@ def test_mbh_run_on_a_read_only_root_fails_before_any_case_and_keeps_what_is_sto
     assert snapshot(root) == before  # no new run folder, nothing changed
 
 
+def test_mbh_run_on_a_read_only_root_fails_before_building_a_reference(tmp_path, monkeypatch):
+    """The root is checked first: a scene without a stored reference would otherwise have its
+    reference built (seconds to minutes) before the run failed."""
+    shipped = Path(__file__).resolve().parents[2] / "scenarios" / "fourbar.toml"
+    text = shipped.read_text(encoding="utf-8")
+    assert text.count("duration = 4.0\n") == 1
+    (tmp_path / "my_fourbar.toml").write_text(text.replace("duration = 4.0\n", "duration = 3.0\n"),
+                                              encoding="utf-8")
+    campaign_path = tmp_path / "mine.toml"
+    campaign_path.write_text(CAMPAIGN.replace('"fourbar"', '"my_fourbar.toml"'), encoding="utf-8")
+    references = tmp_path / "references"
+    monkeypatch.setenv("MBH_CACHE_DIR", str(references))
+    root = tmp_path / "results"
+    root.mkdir()
+    read_only(root, monkeypatch)
+    try:
+        status, out, err = mbh("run", campaign_path, "--root", root, "--quiet")
+    finally:
+        root.chmod(0o755)
+    assert status == 2 and err.startswith(f"mbh: results root {root}: "), (status, err)
+    assert not references.exists() or not any(references.iterdir())  # nothing built
+
+
 def test_resuming_on_a_read_only_root_fails_early_and_changes_nothing(tmp_path, monkeypatch):
     root = tmp_path / "results"
     stopped = RunStore.create(campaign(), root)
