@@ -74,6 +74,12 @@ class NotGenerated(RuntimeError):
     system without a certificate at the traced state), or the source did not compile."""
 
 
+class NotTraceable(NotGenerated):
+    """No generated function for a reason that holds whenever the same inputs are traced (the
+    operation limit, a kernel path through LAPACK): the reason :func:`compiled_function`
+    remembers.  Any other failure of a trace is not remembered."""
+
+
 #: The generated functions, by their index in :func:`functions`' tuple (all of
 #: :data:`SIGNATURE`; ``out`` as given):
 #:
@@ -137,8 +143,11 @@ def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> 
             out = kernel_outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
                            graph.scalar("t", 0.0))
     except tracing.LimitReached:
-        raise NotGenerated(f"the trace takes more than {MAX_OPERATIONS} operations") from None
-    except Exception as error:  # noqa: BLE001 — an untraceable branch; the kernel runs instead
+        raise NotTraceable(f"the trace takes more than {MAX_OPERATIONS} operations") from None
+    except tracing.Untraceable as error:
+        raise NotTraceable(f"the kernels' path at the start cannot be traced: "
+                           f"{type(error).__name__}: {error}") from None
+    except Exception as error:  # noqa: BLE001 — an unforeseen branch; the kernel runs instead
         raise NotGenerated(f"the kernels' path at the start cannot be traced: "
                            f"{type(error).__name__}: {error}") from None
     return tracing.function_source(graph, name, ("q", "v", "t"), out)
@@ -191,10 +200,10 @@ def module_name(source: str) -> str:
 def _traced_source(key: str | None, which: int, formulation, q0: np.ndarray,
                    v0: np.ndarray) -> str:
     """The module source of generated function ``which``, traced now; what the trace gave (the
-    module's name, or why there is none) is remembered under ``key``."""
+    module's name, or why there can be none: :class:`NotTraceable`) is remembered under ``key``."""
     try:
         body = function_source(which, formulation, q0, v0)
-    except NotGenerated as error:
+    except NotTraceable as error:
         if key:
             generated_store.remember(key, {"not_generated": str(error)})
         raise

@@ -110,6 +110,20 @@ def test_a_garbled_memo_is_ignored(store):
     assert generated_store.remembered(key)["module"].startswith("mbh_")
 
 
+def test_a_failure_of_the_trace_other_than_its_limits_is_not_remembered(store, monkeypatch):
+    """An unforeseen error in a trace (here one made up) may not recur: the next call traces again."""
+    formulation, q0, v0 = start()
+
+    def failing(*args):
+        raise FloatingPointError("made up")
+
+    monkeypatch.setattr(generated, "kernel_outputs", failing)
+    with pytest.raises(generated.NotGenerated, match="FloatingPointError: made up"):
+        generated.compiled_function(generated.RESIDUAL_SIZE, formulation, q0, v0)
+    assert generated_store.remembered(
+        generated.trace_key(generated.RESIDUAL_SIZE, formulation, q0, v0)) is None
+
+
 def _copy(formulation, **changes) -> SimpleNamespace:
     """The inputs of a trace of ``formulation`` as a plain object, with ``changes``."""
     fields = dict(rows=formulation.rows, gains=formulation.gains, cut=formulation.cut,
