@@ -47,6 +47,7 @@ from __future__ import annotations
 import ctypes
 import faulthandler
 import multiprocessing
+import multiprocessing.connection
 import multiprocessing.forkserver
 import os
 import pickle
@@ -140,11 +141,23 @@ class _ColdWorker:
         return self._output
 
 
+#: Held around every start of a forked worker and every read of its exit code, in every thread.
+#: The fork server sends a child's exit code down a pipe that can be read once, and
+#: multiprocessing polls every live child from whichever thread starts the next process
+#: (``Process.start``).  Two threads could then read the same pipe at once, and the one left with
+#: nothing reported exit code 255 for a case that had finished: a stray ``crashed`` row, seen in
+#: CI under load.
+_POLL_LOCK = threading.Lock()
+
+
 class _ForkedWorker:
     """A case in a process forked from the warm template (:mod:`harness.run.warm`), output to a
     file beside the result, in a process group of its own, with this process's working folder,
     environment (plus :data:`WORKER_ENV`) and ``sys.path`` as they are now, not as they were when
-    the template started."""
+    the template started.
+
+    Its start and every read of its exit code hold :data:`_POLL_LOCK`.
+    """
 
     def __init__(self, context, work: Callable, spec, result_path: Path):
         self._output_path = result_path.with_name("output.txt")
@@ -152,19 +165,28 @@ class _ForkedWorker:
         self.process = context.Process(target=_forked_main, name="mbh-case",
                                        args=(str(result_path), str(self._output_path), here,
                                              work, spec))
-        self.process.start()
+        with _POLL_LOCK:
+            self.process.start()
+
+    def _exit_code(self, timeout_s: float | None) -> int | None:
+        """The exit code once the process has ended (negative: the signal), or None if it still
+        runs after ``timeout_s`` (None: wait for the end)."""
+        if not multiprocessing.connection.wait([self.process.sentinel], timeout_s):
+            return None
+        with _POLL_LOCK:
+            return self.process.exitcode
 
     def wait(self, timeout_s: float) -> int:
-        self.process.join(timeout_s)
-        if self.process.exitcode is None:
+        code = self._exit_code(timeout_s)
+        if code is None:
             raise subprocess.TimeoutExpired("mbh-case", timeout_s)
-        return self.process.exitcode
+        return code
 
     def kill(self) -> None:
         _kill_group(self.process.pid)
 
     def output(self) -> bytes:
-        self.process.join()
+        self._exit_code(None)
         try:
             return self._output_path.read_bytes()
         except OSError:
