@@ -94,8 +94,7 @@ def test_no_finished_case_is_read_as_crashed_when_cases_start_and_end_together(m
     while that poll's is not, so a start that meets a finishing case reads the code first: the
     order that, without the executor's poll lock, left the case's thread with nothing and a
     ``crashed`` row with exit code 255 (seen in CI; at least 4 of the 12 cases in each of two
-    runs here without the lock, 2026-11-27).  Every
-    row is ok."""
+    runs here without the lock, 2026-11-27).  Every row is ok."""
     real = multiprocessing.forkserver.read_signed
 
     def slow_unless_polled_by_a_start(fd):
