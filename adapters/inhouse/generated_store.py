@@ -165,7 +165,8 @@ def _keep_bytecode(path: Path, source: bytes) -> None:
     cannot be written only loses the saving."""
     bytecode = Path(importlib.util.cache_from_source(str(path)))
     try:
-        header = bytecode.read_bytes()[:16]
+        with bytecode.open("rb") as file:
+            header = file.read(16)  # magic, flags, source hash (PEP 552); not the code
     except OSError:
         header = b""
     if header == importlib.util.MAGIC_NUMBER + _CHECKED_HASH + importlib.util.source_hash(source):
