@@ -11,6 +11,19 @@ import numpy as np
 from harness.model.trajectory import Trajectory
 
 
+#: A small campaign ``mbh run`` can run (three fourbar cases of 0.2 s), for the store's end-to-end
+#: tests.
+RUNNABLE_CAMPAIGN = """
+calibration = false
+[t_end]
+"*" = 0.2
+[[group]]
+scenarios = ["fourbar"]
+methods = { inhouse = ["rk4+none"] }
+dts = [1e-2, 5e-3, 2e-3]
+"""
+
+
 @dataclass(frozen=True)
 class Spec:
     """The CaseSpec attributes the store reads (harness.run.spec.CaseSpec has more)."""

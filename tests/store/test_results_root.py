@@ -28,17 +28,9 @@ from harness.run.campaign import run_campaign
 from harness.run.spec import load_campaign
 from harness.store import runs
 from harness.store.runs import RunStore, StoreError
-from tests.store.store_cases import SPECS, campaign, row_for, trajectory
+from tests.store.store_cases import RUNNABLE_CAMPAIGN, SPECS, campaign, row_for, trajectory
 
-CAMPAIGN = """
-calibration = false
-[t_end]
-"*" = 0.2
-[[group]]
-scenarios = ["fourbar"]
-methods = { inhouse = ["rk4+none"] }
-dts = [1e-2, 5e-3, 2e-3]
-"""
+CAMPAIGN = RUNNABLE_CAMPAIGN
 
 
 def failing_writes(monkeypatch, code: int, after: int = 0, only=("",)) -> None:
@@ -72,6 +64,14 @@ def read_only(root: Path, monkeypatch) -> str:
 def snapshot(root: Path) -> dict[str, bytes]:
     return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
             if p.is_file()}
+
+
+def stored_run(root: Path, status: str) -> RunStore:
+    """A run of one stored case under ``root``, finished with ``status``."""
+    store = RunStore.create(campaign(), root)
+    store.add(row_for(SPECS[0]), trajectory())
+    store.finish(status)
+    return store
 
 
 def mbh(*argv) -> tuple[int, str, str]:
@@ -135,9 +135,7 @@ def test_a_nearly_full_disk_is_refused(tmp_path, monkeypatch):
 def test_mbh_run_on_a_read_only_root_fails_before_any_case_and_keeps_what_is_stored(
         tmp_path, monkeypatch, campaign_file):
     root = tmp_path / "results"
-    kept = RunStore.create(campaign(), root)
-    kept.add(row_for(SPECS[0]), trajectory())
-    kept.finish("complete")
+    stored_run(root, "complete")
     before = snapshot(root)
     read_only(root, monkeypatch)
     try:
@@ -174,9 +172,7 @@ def test_mbh_run_on_a_read_only_root_fails_before_building_a_reference(tmp_path,
 
 def test_resuming_on_a_read_only_root_fails_early_and_changes_nothing(tmp_path, monkeypatch):
     root = tmp_path / "results"
-    stopped = RunStore.create(campaign(), root)
-    stopped.add(row_for(SPECS[0]), trajectory())
-    stopped.finish("interrupted")
+    stopped = stored_run(root, "interrupted")
     before = snapshot(root)
     read_only(root, monkeypatch)
     try:

@@ -27,16 +27,9 @@ from harness.run.spec import CaseSpec, load_campaign
 from harness.run.sweep import bisections, stability_sweep
 from harness.store import runs
 from harness.store.runs import MissingTrajectory, RunStore, StoreError, StoreWarning
+from tests.store.store_cases import RUNNABLE_CAMPAIGN
 
-CAMPAIGN = """
-calibration = false
-[t_end]
-"*" = 0.2
-[[group]]
-scenarios = ["fourbar"]
-methods = { inhouse = ["rk4+none"] }
-dts = [1e-2, 5e-3, 2e-3]
-[sweep]
+CAMPAIGN = RUNNABLE_CAMPAIGN + """[sweep]
 scenarios = ["fourbar"]
 adapters = ["inhouse"]
 methods = ["rk4+direct"]
