@@ -77,7 +77,7 @@ def kernel_us(name: str) -> dict:
     adapter, mech = get_adapter("inhouse"), scenario.load(name)
     spec, params = adapter.method_spec("rk4+direct:loop=generated")
     stepper = adapter._start(mech, spec, params, RunGrid(DT, DT, np.zeros(1), True))
-    _, rows, constraint_args, dynamics_args, sparsity_arrays, functions = stepper._model
+    _, rows, constraint_args, dynamics_args, sparsity_arrays, functions = stepper._model[:6]
     arguments = (stepper.q, stepper.v + 0.1, rows, constraint_args, dynamics_args,
                  sparsity_arrays, functions)
     costs = {}

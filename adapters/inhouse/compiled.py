@@ -46,10 +46,17 @@ RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILE
 
 #: The members of the model tuple the compiled loop reads, by name: the Baumgarte gains (α, β),
 #: the constraint rows, the constraint kernels' arguments, the force kernels' arguments, the
-#: sparsity arrays of Φ_q and the generated functions.  numba folds these module constants into
-#: the tuple's indexing, so the names cost nothing; a named tuple in their place made the
-#: generated loop's step 2–3 % slower (docs/measurements.md, "Named model tuple").
-GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED = range(6)
+#: sparsity arrays of Φ_q, the generated functions, and the functions of the generated step
+#: (:func:`_generated_step`: the generated ones when every function the formulation calls was
+#: generated, else :data:`~adapters.inhouse.generated.NOTHING`, so that a step never computes its
+#: stages twice).  numba folds these module constants into the tuple's indexing, so the names cost
+#: nothing; a named tuple in their place made the generated loop's step 2–3 % slower
+#: (docs/measurements.md, "Named model tuple").
+GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED, GENERATED_STEP = range(7)
+
+#: What :func:`_generated_step` returns when one of its functions declined a call (a guard, or
+#: :data:`~adapters.inhouse.generated.NEVER`): nothing was changed, the full step runs instead.
+DECLINED = -1
 
 #: Stabilisation codes of :func:`run_steps`.
 PLAIN, PROJECTED, PARTITIONED = range(3)
@@ -266,6 +273,121 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
 
 
 @njit(cache=True)
+def _generated_stages(q, v, t, h, tableau, acceleration):
+    """The stages and update of :func:`_nystrom_step` (same operations, same bits) with every q̈
+    from the generated right-hand side ``acceleration``; ``accepted`` False as soon as it declines
+    a call (the caller then runs :func:`_nystrom_step`).
+
+    Returns
+    -------
+    q_new, v_new : ndarray, shape (n,)
+    accepted : bool
+    """
+    c, a, abar, b, bbar = tableau
+    stages = np.empty((c.shape[0], v.shape[0]))
+    q_stage, v_stage = np.empty(q.shape[0]), np.empty(v.shape[0])
+    for i in range(c.shape[0]):
+        _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
+        if acceleration(q_stage, v_stage, t + c[i] * h, stages[i]) == 0:
+            return q, v, False
+    q_new, v_new = np.empty(q.shape[0]), np.empty(v.shape[0])
+    _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
+    return q_new, v_new, True
+
+
+@njit(cache=True)
+def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated):
+    """:func:`_project` by its generated parts alone (same operations, same bits): ``accepted``
+    False as soon as one declines a call.
+
+    Returns
+    -------
+    q, v : ndarray, shape (n,)
+        The corrected state.
+    indicator : float
+        ρ̂ of the corrected configuration.
+    iterations : int
+        Position corrections made (each one Φ_q and one factorisation, as :func:`_project`
+        counts them).
+    accepted : bool
+    """
+    n = q.shape[0]
+    scratch = np.empty(n + 1)
+    previous = np.inf
+    iterations = 0
+    for _ in range(proj_max_iter):
+        if generated[RESIDUAL_SIZE](q, v, t, scratch) == 0:
+            return q, v, 0.0, iterations, False
+        size = scratch[0]
+        if size < proj_tol or not size < previous:
+            break
+        previous = size
+        iterations += 1
+        corrected = np.empty(n)
+        if generated[POSITION_CORRECTION](q, v, t, corrected) == 0:
+            return q, v, 0.0, iterations, False
+        q = corrected
+    if generated[VELOCITY_CORRECTION](q, v, t, scratch) == 0:
+        return q, v, 0.0, iterations, False
+    return q, scratch[:n].copy(), scratch[n], iterations, True
+
+
+@njit(cache=True)
+def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projection, limit,
+                    indicators, measure_indicator, counters):
+    """:func:`_step_and_check` by the generated functions alone, called without the model's tables:
+    passing those ~40 arrays to the step's functions cost ~1 µs a step, more than a pendulum's
+    four right-hand sides (docs/measurements.md, "In-house step cost").  The same operations as
+    :func:`_step_and_check` (the same bits), the counters and ρ̂ (``indicators``, (2,)) updated as
+    it updates them, but only when every call was accepted: otherwise it returns
+    :data:`DECLINED` having changed nothing, and the caller runs :func:`_step_and_check`.
+    Partitioning always declines (its stages need :func:`expand`).
+
+    ``measure_indicator``: ρ̂ is measured at the step's end (placed passages on).
+    """
+    if stabilisation == PARTITIONED:
+        return q, v, DECLINED
+    q_new, v_new, accepted = _generated_stages(q, v, t, t_new - t, tableau,
+                                               generated[ACCELERATION])
+    if not accepted:
+        return q, v, DECLINED
+    stages = tableau[0].shape[0]
+    jacobians, factorizations, iterations = stages, stages, 0
+    rho = 0.0
+    if stabilisation == PROJECTED:
+        q_new, v_new, rho, iterations, accepted = _generated_projection(
+            q_new, v_new, t_new, projection[0], projection[1], generated)
+        jacobians += iterations + 1
+        factorizations += iterations + 1
+    elif measure_indicator:
+        scratch = np.empty(1)
+        accepted = generated[INDICATOR](q_new, v_new, t_new, scratch) == 1
+        jacobians += 1
+        rho = scratch[0]
+    if not accepted:
+        return q, v, DECLINED
+    counters[RHS_EVALS] += stages
+    counters[JACOBIAN_EVALS] += jacobians
+    counters[FACTORIZATIONS] += factorizations
+    counters[NEWTON_ITERATIONS] += iterations
+    if stabilisation == PROJECTED or measure_indicator:
+        indicators[0], indicators[1] = indicators[1], rho
+    return _checked(q, v, q_new, v_new, limit)
+
+
+@njit(cache=True)
+def _checked(q, v, q_new, v_new, limit):
+    """(q_new, v_new, RUNNING), or the old state (q, v) and the divergence code when the new one
+    is not finite or its q or q̇ has a 2-norm over ``limit``."""
+    squared_q, squared_v = q_new @ q_new, v_new @ v_new
+    if not np.isfinite(squared_q + squared_v):
+        return q, v, DIVERGED_NONFINITE
+    if max(squared_q, squared_v) > limit * limit:
+        return q, v, DIVERGED_LIMIT
+    return q_new, v_new, RUNNING
+
+
+@njit(cache=True)
 def _exception_code(partition):
     """The failure code of an exception in a step: :data:`FAILED_NEWTON` when :func:`expand`
     recorded a Newton failure, else :data:`FAILED_LINALG`."""
@@ -306,12 +428,7 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
             passage[2][0], passage[2][1] = passage[2][1], rho
     except Exception:  # noqa: BLE001 — LAPACK or Newton failures end the run as "failed"
         return q, v, _exception_code(partition)
-    squared_q, squared_v = q_new @ q_new, v_new @ v_new
-    if not np.isfinite(squared_q + squared_v):
-        return q, v, DIVERGED_NONFINITE
-    if max(squared_q, squared_v) > limit * limit:
-        return q, v, DIVERGED_LIMIT
-    return q_new, v_new, RUNNING
+    return _checked(q, v, q_new, v_new, limit)
 
 
 @njit(cache=True)
@@ -360,9 +477,13 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
             passages[0] += 1
         else:
             k_end = k + 1
-            q_new, v_new, status = _step_and_check(
-                q, v, t, t0 + k_end * dt, tableau, model, stabilisation, projection, partition,
-                limit, passage, counters)
+            q_new, v_new, status = _generated_step(
+                q, v, t, t0 + k_end * dt, tableau, model[GENERATED_STEP], stabilisation,
+                projection, limit, indicators, placement[0] > 0.0, counters)
+            if status == DECLINED:
+                q_new, v_new, status = _step_and_check(
+                    q, v, t, t0 + k_end * dt, tableau, model, stabilisation, projection,
+                    partition, limit, passage, counters)
             if status != RUNNING:
                 return q, v, k, status, reached
         q, v, k = q_new, v_new, k_end
@@ -388,7 +509,9 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
         :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
         :attr:`ConstraintSystem.sparsity`'s arrays, the five generated functions of
-        :func:`.generated.functions`).
+        :func:`.generated.functions`, and those of the generated step: the same five, or
+        :data:`~.generated.NOTHING` unless every one the formulation calls was generated;
+        :data:`GENERATED_STEP`).
     stabilisation : int
         :data:`PLAIN`, :data:`PROJECTED` (``direct``) or :data:`PARTITIONED`.
     projection : tuple (proj_tol, proj_max_iter, cut)

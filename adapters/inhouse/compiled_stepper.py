@@ -16,10 +16,14 @@ arithmetic.  Partitioning returns to Python only to choose a new split.
 Every formulation but partitioning is read without side effects, so its whole run is one compiled
 call (:func:`compiled.run_samples`): the first :meth:`CompiledStepper._step_to` integrates through
 every sample time of the grid and keeps the states there, and the later calls hand them out (a
-failure is raised at the first sample after it, as step-by-step stepping raises it).  Stepping
-sample by sample cost one numba dispatch of the model's ~40 arrays per sample, ~10 µs, as much as
-a third of a right-hand-side-cheap step at dt = 1e-2 s.  Partitioning steps from sample to sample:
-reading its state moves the Newton start of the dependent coordinates.
+failure is raised at the first sample after it, as step-by-step stepping raises it): a call
+costs ~30 µs of converting the model's ~40 arrays, more than a pendulum's ten steps between two
+samples.  Partitioning steps from sample to sample: reading its state moves the Newton start of
+the dependent coordinates.
+
+Both calls go to the compiled function directly (:func:`_compiled_entry`), not through numba's
+dispatcher, whose typing of the arguments cost ~0.3 ms a call: the model tuple holds the generated
+functions, which numba types in Python.
 """
 
 from __future__ import annotations
@@ -92,13 +96,15 @@ class CompiledStepper(FormulationStepper):
         self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
         self.passages = Passages.of(formulation, integrator_class(integrator_name))
         calls = grid.steps(grid.t_end) * tableau.c.size
+        wanted = self._wanted_functions()
         functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
-            compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
+            wanted, compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
         self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
+        every_one = all(functions[which] is not generated.NEVER for which in wanted)
         self._model = (np.asarray(formulation.gains, dtype=float),
                        np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
                        formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
-                       functions)
+                       functions, functions if every_one else generated.NOTHING)
         params = formulation.params
         self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
                              float(formulation.cut)) if self._code == compiled.PROJECTED
@@ -109,23 +115,33 @@ class CompiledStepper(FormulationStepper):
         self._partition = None
         self._restart(*self._start_state)
         self._samples: _Samples | None = None
-        # Compile (or load from numba's cache) outside the timed stepping.
+        #: Step index of every sample time and of the end, increasing (shape (k,)).
+        self._sample_steps = np.unique(np.rint(np.append(grid.sample_times, grid.t_end)
+                                               / grid.dt).astype(np.int64))
+        # Compile (or load from numba's cache) and find the compiled function outside the timed
+        # stepping.
         if self._code == compiled.PARTITIONED:
-            self._run(0)
+            dispatcher, args = compiled.run_steps, self._steps_args(0)
         else:
-            self._run_samples(np.zeros(0, dtype=np.int64))
+            dispatcher, args = compiled.run_samples, self._samples_args(np.zeros(0, np.int64))
+        dispatcher(*args)
+        self._entry = _compiled_entry(dispatcher, args)
 
-    def _generated_functions(self, compile_new: bool) -> tuple:
+    def _wanted_functions(self) -> list[int]:
         """The generated functions the loop calls for this formulation (:mod:`.generated`): the
         right-hand side always, the projection's parts for ``direct``, ρ̂ for ``none`` and
-        ``baumgarte`` with placed passages on; with ``compile_new`` False only those compiled
-        before; a note for each that could not be had."""
+        ``baumgarte`` with placed passages on."""
         wanted = [generated.ACCELERATION]
         if self._code == compiled.PROJECTED:
             wanted += [generated.RESIDUAL_SIZE, generated.POSITION_CORRECTION,
                        generated.VELOCITY_CORRECTION]
         elif self._code == compiled.PLAIN and self.passages.arrays[0][0] > 0.0:
             wanted.append(generated.INDICATOR)
+        return wanted
+
+    def _generated_functions(self, wanted: list[int], compile_new: bool) -> tuple:
+        """The ``wanted`` generated functions; with ``compile_new`` False only those compiled
+        before; a note for each that could not be had."""
         made, notes = generated.functions(self.formulation, *self._start_state, wanted,
                                           compile_new)
         self.notes.extend(notes)
@@ -159,11 +175,14 @@ class CompiledStepper(FormulationStepper):
                                self._partition, self._counters)
 
     # -- stepping ------------------------------------------------------------------------------
+    def _steps_args(self, last: int) -> tuple:
+        """Arguments of :func:`compiled.run_steps` from the integrated state to step ``last``."""
+        return (self.q, self.v, 0.0, self.grid.dt, self.steps, last, self._tableau, self._model,
+                self._code, self._projection, self._partition, self._check_due, self._limit,
+                self.passages.arrays, self._counters)
+
     def _run(self, last: int):
-        return compiled.run_steps(self.q, self.v, 0.0, self.grid.dt, self.steps, last,
-                                  self._tableau, self._model, self._code, self._projection,
-                                  self._partition, self._check_due, self._limit,
-                                  self.passages.arrays, self._counters)
+        return self._entry(*self._steps_args(last))
 
     def _step_to(self, t: float) -> None:
         target = self.grid.steps(t)
@@ -183,24 +202,28 @@ class CompiledStepper(FormulationStepper):
 
     def _targets_from(self, target: int) -> np.ndarray:
         """Step indices of ``target`` and of every later sample time and the end, shape (k,)."""
-        grid = self.grid
-        later = {grid.steps(t) for t in (*grid.sample_times, grid.t_end)}
-        return np.array(sorted(step for step in later | {target} if step >= target),
-                        dtype=np.int64)
+        later = self._sample_steps[np.searchsorted(self._sample_steps, target):]
+        return later if later.size and later[0] == target else np.insert(later, 0, target)
 
-    def _run_samples(self, targets: np.ndarray) -> _Samples:
-        """Integrate from the last integrated state through every step of ``targets`` in one
-        call."""
+    def _samples_args(self, targets: np.ndarray) -> tuple:
+        """Arguments of :func:`compiled.run_samples` from the last integrated state through every
+        step of ``targets``, with fresh output rows."""
         q, v, first = (self.q, self.v, self.steps) if self._samples is None \
             else self._samples.end[:3]
         if targets.size and targets[0] < first:
             raise ValueError(f"step {targets[0]} was passed without its state being kept "
                              f"(the run is at step {first})")
-        q_out, v_out = np.empty((targets.size, q.size)), np.empty((targets.size, v.size))
-        q, v, done, status, reached = compiled.run_samples(
-            q, v, 0.0, self.grid.dt, first, targets, self._tableau, self._model, self._code,
-            self._projection, self._partition, self._check_due, self._limit,
-            self.passages.arrays, self._counters, q_out, v_out)
+        return (q, v, 0.0, self.grid.dt, first, targets, self._tableau, self._model, self._code,
+                self._projection, self._partition, self._check_due, self._limit,
+                self.passages.arrays, self._counters, np.empty((targets.size, q.size)),
+                np.empty((targets.size, v.size)))
+
+    def _run_samples(self, targets: np.ndarray) -> _Samples:
+        """Integrate from the last integrated state through every step of ``targets`` in one
+        call."""
+        args = self._samples_args(targets)
+        q, v, done, status, reached = self._entry(*args)
+        q_out, v_out = args[-2:]
         row = {step: k for k, step in enumerate(targets[:reached].tolist())}
         return _Samples(row, q_out[:reached], v_out[:reached], (q, v, done, status))
 
@@ -280,6 +303,16 @@ def hand_back_note(kernel_calls: int, rhs_evals: int) -> str | None:
             f"({100.0 * kernel_calls / rhs_evals:.3g} %) to the kernels: a guard of the "
             f"generated right-hand side (a pivot or a certificate bound of its solves) came out "
             f"otherwise than at the traced start")
+
+
+def _compiled_entry(dispatcher, args: tuple):
+    """The compiled function of numba ``dispatcher`` for the types of ``args`` (compiled or loaded
+    already), called with its arguments converted but not typed: the dispatcher types every call's
+    arguments to choose a compilation, ~0.3 ms for the model tuple (its generated functions have
+    no fast type fingerprint, so numba types the whole tuple in Python), more than a pendulum's
+    run of 1000 steps.  Every later call must pass arguments of the same types, as the stepper
+    does: its arrays are C-contiguous float64 or int64 by construction."""
+    return dispatcher.overloads[tuple(dispatcher.typeof_pyval(arg) for arg in args)].entry_point
 
 
 @dataclass(frozen=True)
