@@ -343,8 +343,22 @@ def interrupt_and_resume(path: Path, results: Path, signum: int) -> dict:
     return manifest
 
 
+#: Two cases of ~4–6 s each on the Python loop (55 µs a step here), so that the run is still
+#: writing its second case while a second writer starts (~2 s), whichever case runs first.  The
+#: compiled loop's cases of :data:`INTERRUPTIBLE` all end in ~3 s since the loop got faster.
+LONG_CASES = """
+timeout_s = 120.0
+calibration = false
+
+[[group]]
+scenarios = ["fourbar"]
+methods = { inhouse = ["rk4+direct:loop=python"] }
+dts = [5e-5, 4e-5]
+"""
+
+
 def test_a_second_writer_of_a_running_run_is_refused_and_changes_nothing(tmp_path, results):
-    path = write_campaign(tmp_path, "interruptible", INTERRUPTIBLE)
+    path = write_campaign(tmp_path, "long", LONG_CASES)
     run = start_run(path, results)
     try:
         (manifest,) = list_runs(results)
