@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 from harness.model import scenario
 from harness.common.environment import code_fingerprint
-from harness.run.executor import execute, usable_cores
+from harness.run.executor import WorkerProcesses, execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.store.runs import CaseCache, RunLocked, RunStore
 from harness.run.sweep import bisections, stability_sweep
@@ -318,6 +318,8 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     else:
         check_scheduler(scheduler)
     RunStore.check_writable(root)  # before references are built: that can take minutes
+    if scheduler is None and warm_workers:
+        WorkerProcesses.start_template()  # its start overlaps the references' preparation
     names = {spec.scenario for spec in campaign.cases}
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)
