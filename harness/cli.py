@@ -448,11 +448,11 @@ def cmd_show(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from harness.store.compare import compare_runs
+    from harness.store.compare import comparable_calibrations, compare_runs
 
     root = _results_root(args)
     a, b = _open_run(args.run_a, root), _open_run(args.run_b, root)
-    changes = compare_runs(a.cases(), b.cases(), a.calibration_s, b.calibration_s)
+    changes = compare_runs(a.cases(), b.cases(), *comparable_calibrations(a, b))
     if args.json:
         _print_json(_records(changes))
         return 0

@@ -52,7 +52,7 @@ from harness.run.spec import load_campaign
 from harness.run.campaign import CaseWork, run_campaign
 from harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
-from harness.store.compare import compare_runs
+from harness.store.compare import comparable_calibrations, compare_runs
 from harness.store.runs import RunStore, latest_run, list_runs
 from harness.common.numbers import format_number
 
@@ -388,8 +388,8 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
         changes = pd.DataFrame(columns=["case_id", "change"])
     else:
         before = RunStore.open(previous, root)
-        changes = compare_runs(before.cases(), store.cases(), before.calibration_s,
-                               store.calibration_s, error_factor=error_factor,
+        changes = compare_runs(before.cases(), store.cases(),
+                               *comparable_calibrations(before, store), error_factor=error_factor,
                                time_factor=time_factor)
     history = history_gate(store, root)
     reports, note = build_reports(store, previous, root, tuple(formats), history)

@@ -31,7 +31,7 @@ from harness.report import failures, figures, mechanism, seed_compare, summary
 from harness.report.summary import Table
 from harness.model.scenario import ScenarioError
 from harness.measure.verdict import DEFAULT_ACCURACY
-from harness.store.compare import compare_runs
+from harness.store.compare import comparable_calibrations, compare_runs
 from harness.store.runs import RunStore, latest_run
 from harness.common.errors import MbhError
 
@@ -329,7 +329,7 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
                                "no earlier finished run of the same campaign).")
     else:
         report.changes = summary.changes_table(compare_runs(
-            previous.cases(), cases, previous.calibration_s, calibration))
+            previous.cases(), cases, *comparable_calibrations(previous, store)))
     for name in names:
         mine = cases[cases["scenario"] == name]
         report.work_precision.append(

@@ -71,8 +71,9 @@ class History:
         Results root read (None: the default).
     runs : DataFrame
         One row per run, oldest first, index 0 … n−1: ``run_id``, ``started``, ``status``,
-        ``commit`` (12 characters, ``+dirty`` appended for a dirty tree), ``calibration_s`` (s or
-        NaN), ``packages`` (dict: package → version).
+        ``commit`` (12 characters, ``+dirty`` appended for a dirty tree), ``calibration_s`` (s;
+        NaN without a figure or with one another workload than the newest run's measured),
+        ``packages`` (dict: package → version).
     cases : DataFrame
         One row per run and case: ``run`` (index into ``runs``) and :data:`_CASE_COLUMNS` plus
         ``calibrated_time`` (wall time / calibration time; NaN without a calibration).
@@ -110,9 +111,12 @@ def load_history(campaign: str | None = None, root: Path | None = None) -> Histo
                            f"{campaign!r}" + (f" (campaigns stored: {', '.join(held)})" if held
                                               else " (no finished run at all)"))
     runs, frames = [], []
-    for index, manifest in enumerate(mine):
-        store = RunStore.open(manifest["run_id"], root)
-        calibration = store.calibration_s
+    stores = [RunStore.open(manifest["run_id"], root) for manifest in mine]
+    for index, (manifest, store) in enumerate(zip(mine, stores)):
+        # Calibrated times compare only between runs whose figure the same workload measured:
+        # the newest run's (an older numpy or scipy, or an older calibration, gives NaN).
+        calibration = (store.calibration_s
+                       if store.calibration_workload == stores[-1].calibration_workload else None)
         runs.append({"run_id": manifest["run_id"], "started": manifest["started"],
                      "status": manifest["status"], "commit": _commit(manifest),
                      "calibration_s": float(calibration) if calibration else np.nan,

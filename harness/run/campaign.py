@@ -6,8 +6,9 @@ Stages of :func:`run_campaign`, in order:
    workers only read the cache; a refused reference (``ReferenceBuildError``) means that scenario's
    cases run without one (their rows say ``reference = "none: <reason>"``);
 2. the run folder is created, or reopened with ``resume`` (its stored cases are skipped);
-3. the calibration case (:func:`harness.run.row.calibration_spec`) runs alone, and its wall time
-   is stored as the run's machine-speed figure (times of different runs compare as ratios to it);
+3. the calibration case (:mod:`harness.run.calibration`: a fixed numpy and scipy workload, in a
+   fresh interpreter while the warm template starts) gives the run's machine-speed figure (times
+   of different runs compare as ratios to it);
 4. the cases run through :func:`harness.run.executor.execute` (one fresh process each) and are stored
    as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.runs.CaseCache`
    (same scenario content, engine version, method, step and duration, computed by the same code
@@ -219,17 +220,18 @@ def _cache_settings(campaign) -> str:
                        "accuracy": campaign.accuracy}, sort_keys=True)
 
 
-def _calibrate(store: RunStore, work, backend: dict, say) -> None:
-    """Run the calibration case alone and store its wall time (a failed one is reported)."""
-    from harness.run.row import calibration_spec
+def _calibrate(store: RunStore, backend: dict, say) -> None:
+    """Run the calibration case (:mod:`harness.run.calibration`; locally in a fresh interpreter,
+    while the warm template starts) and store its figure (a failed one is reported)."""
+    from harness.run.calibration import CALIBRATION, calibration_work
 
     rows = []
-    execute([calibration_spec()], work, workers=1, **backend,
+    execute([CALIBRATION], calibration_work, workers=1, **(backend | {"warm": False}),
             on_result=lambda spec, row, trajectory: rows.append(row), progress=False)
     row = rows[0]
     seconds = row.get("wall_time_s")
     if row.get("status") == "ok" and seconds is not None and math.isfinite(seconds) and seconds > 0:
-        store.set_calibration(seconds)
+        store.set_calibration(seconds, row.get("workload"))
     else:
         say(f"mbh: calibration case ended {row.get('status')} ({row.get('reason')}); this run "
             f"has no machine-speed figure")
@@ -328,7 +330,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     store = _open_store(campaign, resume, root)
     try:
         if campaign.calibration and store.calibration_s is None:
-            _calibrate(store, work, backend, say)
+            _calibrate(store, backend, say)
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]
         recorder = _Recorder(store, CaseCache(root), _cache_keys(

@@ -39,18 +39,6 @@ from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.model.trajectory import Trajectory
 from harness.measure.verdict import Bounds
 
-#: The calibration case: a fixed in-house run whose wall time is the machine-speed figure that
-#: makes times of different runs and machines comparable as ratios (8000 RK4 steps with
-#: projection; about a second on the development machine, see docs/measurements.md, section
-#: "Campaign sizes").
-CALIBRATION = CaseSpec("fourbar", "inhouse", "rk4+direct", 5e-4, 4.0)
-
-
-def calibration_spec() -> CaseSpec:
-    """The fixed calibration case (:data:`CALIBRATION`)."""
-    return CALIBRATION
-
-
 def packages(adapter: Adapter) -> str:
     """JSON of the versions that produced a row: numpy, scipy, the engine and, for a third-party
     adapter, the package providing it (``adapter_package``: ``"NAME VERSION"``)."""

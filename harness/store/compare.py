@@ -29,6 +29,15 @@ def _calibration(value, name: str) -> float:
     return value
 
 
+def comparable_calibrations(a, b) -> tuple[float | None, float | None]:
+    """The machine-speed figures (:attr:`~harness.store.runs.RunStore.calibration_s`) of runs ``a``
+    and ``b`` when the same workload measured both, else (None, None): their times are then not
+    compared (a changed numpy or scipy, or a run calibrated before the workload)."""
+    if a.calibration_workload is None or a.calibration_workload != b.calibration_workload:
+        return None, None
+    return a.calibration_s, b.calibration_s
+
+
 def compare_runs(a: pd.DataFrame, b: pd.DataFrame, calibration_a: float | None,
                  calibration_b: float | None, error_factor: float = 10.0,
                  time_factor: float = 1.5, error_floor: float = 0.0) -> pd.DataFrame:

@@ -60,6 +60,7 @@ import pyarrow.parquet as pq
 from harness.common.locations import checkout, user_data
 from harness.common import jsonout
 from harness.common.errors import MbhError
+from harness.common.machine_speed import workload_name
 
 from harness.model import scenario
 from harness.common.environment import git_state, machine, package_versions
@@ -729,18 +730,32 @@ class RunStore:
         """Case ids with a stored row (whatever their status): what ``--resume`` skips."""
         return self._cases.keys()
 
-    def set_calibration(self, seconds: float) -> None:
-        """Record the calibration case's wall time, s (positive and finite)."""
+    def set_calibration(self, seconds: float, workload: str | None = None) -> None:
+        """Record the run's machine-speed figure, s (positive and finite), and the workload that
+        measured it (default: this process's,
+        :func:`~harness.common.machine_speed.workload_name`)."""
         seconds = float(seconds)
         if not np.isfinite(seconds) or seconds <= 0:
             raise ValueError(f"calibration time must be positive and finite, got {seconds!r} s")
         self.manifest["calibration_s"] = seconds
+        self.manifest["calibration_workload"] = workload or workload_name()
         self._write_manifest()
 
     @property
     def calibration_s(self) -> float | None:
-        """The calibration case's wall time, s (None until :meth:`set_calibration`)."""
+        """The run's machine-speed figure, s (:mod:`harness.common.machine_speed`): None until
+        :meth:`set_calibration`, and for a run stored before the figure was that workload's
+        (its ``calibration_s`` timed an in-house case, which followed the in-house code's speed
+        rather than the machine's)."""
+        if self.calibration_workload is None:
+            return None
         return self.manifest.get("calibration_s")
+
+    @property
+    def calibration_workload(self) -> str | None:
+        """What measured :attr:`calibration_s` (:func:`~harness.common.machine_speed.workload_name`;
+        two figures compare only when these are equal), or None."""
+        return self.manifest.get("calibration_workload")
 
     def mark_running(self) -> None:
         """Set the status back to ``running`` (a resumed run), clearing the end time."""

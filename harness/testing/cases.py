@@ -5,7 +5,7 @@ process of their own.
 * :class:`CaseRunner` runs cases (:func:`harness.run.row.run_spec`: the same build → simulate →
   verdict → metrics as a campaign) and keeps every finished case for the session, so a
   parametrized suite that asks for a case twice runs it once; it also loads references and runs
-  the calibration case (:func:`harness.run.row.calibration_spec`) once, for calibrated time
+  the machine-speed workload (:mod:`harness.common.machine_speed`) once, for calibrated time
   ratios.  An isolated case runs as a campaign's does (:func:`harness.run.executor.run_isolated`):
   an engine that crashes or hangs gives a ``crashed`` or ``timeout`` case, the signal named in its
   reason, and the test session goes on;
@@ -31,6 +31,7 @@ from harness.model.timegrid import reference_indices
 from harness.model.trajectory import Trajectory
 from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
 from harness.common.errors import MbhError
+from harness.common.machine_speed import machine_speed_s
 
 #: Key of a tolerance table (and of a :class:`Selection`) that matches every name.
 ANY = "*"
@@ -186,7 +187,7 @@ class SessionCase:
 
     @property
     def calibrated_time(self) -> float:
-        """Wall time / the calibration case's wall time (dimensionless)."""
+        """Wall time / the session's machine-speed figure (dimensionless)."""
         return self.wall_time_s / self.calibration()
 
     def describe(self) -> str:
@@ -261,21 +262,11 @@ class CaseRunner:
         return self._references[scenario_name]
 
     def calibration_s(self) -> float:
-        """Wall time of the calibration case in this session, s (run on first call).
-
-        Raises
-        ------
-        RuntimeError
-            When the calibration case does not end ``ok``.
-        """
+        """The session's machine-speed figure, s (:func:`~harness.common.machine_speed.machine_speed_s`,
+        measured in this process on first call).  It times numpy and scipy only, not this
+        project's code, so a calibrated time changes with the case, not with the harness."""
         if self._calibration_s is None:
-            from harness.run.row import calibration_spec, run_spec
-
-            row = run_spec(calibration_spec(), DEFAULT_BOUNDS, self.accuracy).row
-            if row["status"] != "ok" or not row["wall_time_s"] > 0:
-                raise RuntimeError(f"calibration case {calibration_spec().case_id} ended "
-                                   f"{row['status']}: {row['reason']}")
-            self._calibration_s = float(row["wall_time_s"])
+            self._calibration_s = machine_speed_s()
         return self._calibration_s
 
     def run(self, spec: CaseSpec, isolated: bool = False) -> SessionCase:

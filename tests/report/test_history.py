@@ -214,3 +214,14 @@ def test_mbh_history_on_stored_runs(tmp_path):
     status, _, stderr = run_mbh("history", "--campaign", "nightly", "--root", str(root))
     assert status == 2 and "no finished run of campaign 'nightly'" in stderr \
         and "campaigns stored: tiny" in stderr
+
+
+def test_calibrated_times_are_kept_only_for_runs_measured_by_the_newest_runs_workload(tmp_path):
+    root = tmp_path / "results"
+    ids = _store_runs(root, [1e-8, 1e-8, 1e-8])
+    RunStore.open(ids[0], root).set_calibration(0.02, "solve_ivp+lu/1 numpy 1.0 scipy 1.0")
+    history = load_history("tiny", root)
+    assert np.isnan(history.runs["calibration_s"][0])
+    assert history.runs["calibration_s"][1:].tolist() == [0.02, 0.02]
+    assert np.isnan(history.cases["calibrated_time"][0])
+    assert history.cases["calibrated_time"][1:].tolist() == pytest.approx([0.5, 0.5])

@@ -12,9 +12,8 @@ from adapters import get_adapter
 from harness.run import row as case_row
 from harness.model import scenario
 from harness.run.spec import CaseSpec
-from harness.run.row import calibration_spec, error_row, run_spec
+from harness.run.row import error_row, run_spec
 from harness.references.build import ReferenceBuildError
-from harness.model.timegrid import steps_per_sample
 from harness.measure.verdict import DEFAULT_BOUNDS
 
 #: Columns every row carries (the interface of issue 10), besides error_/final_<output>.
@@ -91,14 +90,6 @@ def test_error_row_has_the_same_columns(cheap_row):
     assert (row["status"], row["reason"], row["accurate"]) == ("timeout", "ran past 120 s", False)
     assert math.isnan(row["main_output_error"]) and math.isnan(row["error_crank_angle"])
     assert {key: value for key, value in row.items() if not isinstance(value, SCALAR)} == {}
-
-
-def test_calibration_case_is_a_valid_in_house_case():
-    spec = calibration_spec()
-    adapter = get_adapter(spec.adapter)
-    adapter.method_spec(spec.method)
-    assert steps_per_sample(spec.dt) >= 1
-    assert spec.t_end <= scenario.load(spec.scenario).duration
 
 
 #: (coordinates, constraint rows, redundant rows) each engine reports for each shipped scene,
