@@ -224,7 +224,7 @@ def assert_convergence_order(results: list[SessionCase], low: float, high: float
 
 def assert_at_least_as_fast(result: SessionCase, other: SessionCase, factor: float = 1.0) -> None:
     """``result`` takes at most ``factor`` times ``other``'s calibrated wall time (each wall
-    time divided by its session's calibration case time, so runs compare as ratios)."""
+    time divided by its session's machine-speed figure, so runs compare as ratios)."""
     __tracebackhide__ = True
     if not factor > 0:
         raise ToleranceError(f"factor must be positive, got {factor!r}")
