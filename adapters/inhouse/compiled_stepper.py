@@ -182,6 +182,7 @@ class CompiledStepper(FormulationStepper):
                 self.passages.arrays, self._counters)
 
     def _run(self, last: int):
+        """:func:`compiled.run_steps` from the integrated state to step ``last``."""
         return self._entry(*self._steps_args(last))
 
     def _step_to(self, t: float) -> None:

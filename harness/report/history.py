@@ -72,7 +72,7 @@ class History:
     runs : DataFrame
         One row per run, oldest first, index 0 … n−1: ``run_id``, ``started``, ``status``,
         ``commit`` (12 characters, ``+dirty`` appended for a dirty tree), ``calibration_s`` (s;
-        NaN without a figure or with one another workload than the newest run's measured),
+        NaN without a figure, or when its workload differs from the newest run's),
         ``packages`` (dict: package → version).
     cases : DataFrame
         One row per run and case: ``run`` (index into ``runs``) and :data:`_CASE_COLUMNS` plus
