@@ -46,6 +46,7 @@ from harness.model import parts as shapes
 from harness.model.free_turns import ZERO_MOMENT as _ZERO_MOMENT, free_turn
 from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
 from harness.common.errors import MbhError
+from harness.common.kept_files import read_kept
 from harness.common.locations import shipped
 
 #: The shipped scenario files (harness.common.locations: the checkout's or the installed package's).
@@ -369,6 +370,11 @@ def load(name_or_path: str | Path) -> Mechanism:
         return _load_family_member(str(name_or_path))
     if path.suffix != ".toml":
         path = scenario_path(str(name_or_path))
+    return read_kept("scenario", (path,), lambda: _load_file(path))
+
+
+def _load_file(path: Path) -> Mechanism:
+    """Read, validate and build the scenario file ``path`` (see :func:`load`)."""
     file = str(path)
     try:
         _, document = read_toml(path)

@@ -1,9 +1,7 @@
-"""A run's calibration case: the machine-speed workload (:mod:`harness.common.machine_speed`) in
-a worker process of its own, as every case runs, whose figure the run stores
-(:meth:`harness.store.runs.RunStore.set_calibration`).
-
-Locally it starts in a fresh interpreter that imports numpy and scipy, not from the warm template,
-so that it runs on one core while the template starts on the other.
+"""A run's calibration case on a Dask cluster: the machine-speed workload
+(:mod:`harness.common.machine_speed`) in a worker process of its own, as every case runs there,
+whose figure the run stores (:meth:`harness.store.runs.RunStore.set_calibration`).  A local run
+measures the figure in its own process instead (:func:`harness.run.campaign.run_campaign`).
 """
 
 from __future__ import annotations

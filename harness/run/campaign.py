@@ -6,9 +6,9 @@ Stages of :func:`run_campaign`, in order:
    workers only read the cache; a refused reference (``ReferenceBuildError``) means that scenario's
    cases run without one (their rows say ``reference = "none: <reason>"``);
 2. the run folder is created, or reopened with ``resume`` (its stored cases are skipped);
-3. the calibration case (:mod:`harness.run.calibration`: a fixed numpy and scipy workload, in a
-   fresh interpreter while the warm template starts) gives the run's machine-speed figure (times
-   of different runs compare as ratios to it);
+3. the machine-speed figure (:mod:`harness.common.machine_speed`: a fixed numpy and scipy
+   workload; locally in this process while the warm template starts, on a cluster as a case of
+   its own) is stored with the run (times of different runs compare as ratios to it);
 4. the cases run through :func:`harness.run.executor.execute` (one fresh process each) and are stored
    as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.runs.CaseCache`
    (same scenario content, engine version, method, step and duration, computed by the same code
@@ -37,6 +37,7 @@ from dataclasses import dataclass
 
 from harness.model import scenario
 from harness.common.environment import code_fingerprint
+from harness.common.machine_speed import machine_speed_s, workload_name
 from harness.run.executor import WorkerProcesses, execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.store.runs import CaseCache, RunLocked, RunStore
@@ -221,12 +222,16 @@ def _cache_settings(campaign) -> str:
 
 
 def _calibrate(store: RunStore, backend: dict, say) -> None:
-    """Run the calibration case (:mod:`harness.run.calibration`; locally in a fresh interpreter,
-    while the warm template starts) and store its figure (a failed one is reported)."""
+    """Measure the run's machine-speed figure and store it: locally in this process, while the
+    warm template starts on another core; on a cluster as a case (:mod:`harness.run.calibration`)
+    on one of its workers, whose speed the cases get (a failed one is reported)."""
     from harness.run.calibration import CALIBRATION, calibration_work
 
+    if backend["scheduler"] is None:
+        store.set_calibration(machine_speed_s(), workload_name())
+        return
     rows = []
-    execute([CALIBRATION], calibration_work, workers=1, **(backend | {"warm": False}),
+    execute([CALIBRATION], calibration_work, workers=1, **backend,
             on_result=lambda spec, row, trajectory: rows.append(row), progress=False)
     row = rows[0]
     seconds = row.get("wall_time_s")
@@ -320,11 +325,11 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     else:
         check_scheduler(scheduler)
     RunStore.check_writable(root)  # before references are built: that can take minutes
-    if scheduler is None and warm_workers:
-        WorkerProcesses.start_template()  # its start overlaps the references' preparation
     names = {spec.scenario for spec in campaign.cases}
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)
+    if scheduler is None and warm_workers:
+        WorkerProcesses.start_template(names)  # its start overlaps the references' preparation
     prepare_references(names, say)
     backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)

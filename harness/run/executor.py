@@ -47,6 +47,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import faulthandler
+import json
 import multiprocessing
 import multiprocessing.connection
 import multiprocessing.forkserver
@@ -71,6 +72,24 @@ WORKER_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
               "NUMBA_NUM_THREADS": "1"}
 #: Characters of a dead worker's last output kept in its row's reason.
 OUTPUT_TAIL = 600
+#: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template which
+#: scenarios to read before its first fork: a JSON list of names or paths.
+WARM_SCENARIOS_ENV = "MBH_WARM_SCENARIOS"
+
+
+@contextlib.contextmanager
+def _environment(values: dict[str, str]):
+    """Within the block, ``os.environ`` holds ``values`` too; restored after it."""
+    previous = {key: os.environ.get(key) for key in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for key, value in previous.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
 
 
 def usable_cores() -> int:
@@ -222,12 +241,15 @@ class WorkerProcesses:
         return cls._context
 
     @classmethod
-    def start_template(cls) -> None:
+    def start_template(cls, scenarios: Iterable[str] = ()) -> None:
         """Start the warm template now, in the background, so that its imports and warm-up
         (~1.5–2 s) overlap the caller's own preparation instead of delaying the first case.
-        A template that cannot start is left to :meth:`start`, which says so."""
+        The template also reads ``scenarios`` (names or paths) and their stored references once,
+        for every case forked from it (:data:`WARM_SCENARIOS_ENV`).  A template that is already
+        running is kept as it is; one that cannot start is left to :meth:`start`, which says so."""
         cls._fork_context()
-        with contextlib.suppress(OSError, EOFError, ValueError):
+        with contextlib.suppress(OSError, EOFError, ValueError), \
+                _environment({WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios)))}):
             multiprocessing.forkserver.ensure_running()
 
     def start(self, work: Callable, spec, result_path: Path):

@@ -1,7 +1,8 @@
 """The template every warm worker is forked from: imported once by the fork server
-(:mod:`multiprocessing.forkserver`, the ``preload`` of :class:`harness.run.executor.WarmWorkers`),
+(:mod:`multiprocessing.forkserver`, the ``preload`` of :class:`harness.run.executor.WorkerProcesses`),
 it sets the one-thread environment, imports numpy, scipy, the harness and every registered engine,
-and runs a few tiny cases so the compiled in-house kernels are loaded from numba's cache.  Each
+runs a few tiny cases so the compiled in-house kernels are loaded from numba's cache, and reads the
+campaign's scenarios and their stored references (:mod:`harness.common.kept_files`).  Each
 case's process is then forked from this state: a fresh process per case (a crash stays a row) that
 starts in milliseconds instead of seconds (docs/speed.md, "Worker start").
 
@@ -11,6 +12,7 @@ fill (compiled code, loaded references) holds what a cold worker computes or loa
 
 from __future__ import annotations
 
+import json
 import multiprocessing.spawn
 import os
 
@@ -69,5 +71,26 @@ def _warm_up() -> list[str]:
     return missed
 
 
+def _keep_scenarios() -> list[str]:
+    """Read the scenarios :data:`~harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
+    references, inside :func:`harness.common.kept_files.keeping`, so the cases forked from here
+    find them read (a reference that is not stored yet is not built: its cases read or build it
+    as a cold worker does).  Returns what could not be read."""
+    from harness.common.kept_files import keeping
+    from harness.model import scenario
+    from harness.run.executor import WARM_SCENARIOS_ENV
+    from harness.store.reference_files import read_reference
+
+    missed = []
+    with keeping():
+        for name in json.loads(os.environ.get(WARM_SCENARIOS_ENV) or "[]"):
+            try:
+                read_reference(scenario.load(name))
+            except Exception as error:  # noqa: BLE001 — its cases report it themselves
+                missed.append(f"scenario {name}: {error}")
+    return missed
+
+
 #: What the warm-up could not do, for diagnostics (``python -c "import harness.run.warm"``).
-MISSED = _warm_up()
+#: The scenarios are read after the warm-up cases, so nothing those did can change what is kept.
+MISSED = _warm_up() + _keep_scenarios()

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from harness.common.kept_files import read_kept
 from harness.common.locations import shipped, user_cache
 from harness.model.mechanism import Mechanism
 from harness.model.timegrid import GRID_STEP
@@ -117,13 +118,23 @@ def write_reference(mech: Mechanism, trajectory: Trajectory, info: dict) -> None
 
 def read_unchecked(data_path: Path, info_path: Path) -> tuple[Trajectory, dict] | None:
     """The stored (trajectory, info) as they are on disk, or None when a file is missing or
-    unreadable."""
+    unreadable.  The trajectory's arrays are read-only: the warm template's read is kept for every
+    case forked from it (:mod:`harness.common.kept_files`), and none may change what the next reads.
+    """
+    return read_kept("reference", (data_path, info_path),
+                     lambda: _read_files(data_path, info_path))
+
+
+def _read_files(data_path: Path, info_path: Path) -> tuple[Trajectory, dict] | None:
+    """:func:`read_unchecked` from the files themselves."""
     try:
         info = json.loads(info_path.read_text())
         with np.load(data_path) as data:
             trajectory = Trajectory(**{key: data[key] for key in ARRAYS})
     except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
         return None
+    for key in ARRAYS:
+        getattr(trajectory, key).flags.writeable = False
     return trajectory, info
 
 

@@ -1,5 +1,6 @@
 """Campaign runs end to end (harness.run.campaign, harness.run.sweep, ``mbh run/runs/show/compare``):
-the same rows through the process pool and a Dask LocalCluster, failures as rows, Ctrl-C and
+the same rows through the process pool and a Dask LocalCluster, and from warm and cold workers,
+failures as rows, Ctrl-C and
 resume, a diverging method, a bad campaign file refused before anything runs, the stability
 sweep's bisection."""
 
@@ -158,6 +159,37 @@ def test_pool_and_dask_local_cluster_give_the_same_rows(tmp_path, results):
 def test_smoke_campaign_gives_the_same_rows_through_pool_and_dask(results):
     rows = assert_pool_and_dask_agree(load_campaign("smoke"))
     assert set(rows["adapter"]) == set(adapter_names())
+
+
+#: Run in a fresh interpreter, so that the warm template is started for this campaign (and keeps
+#: its scenarios and references), not one an earlier test started: the campaign warm, then cold,
+#: each into its own results root; prints both run ids.
+WARM_AND_COLD = """
+import sys
+from harness.run.campaign import run_campaign
+from harness.run.spec import load_campaign
+
+campaign = load_campaign(sys.argv[1])
+warm = run_campaign(campaign, workers=2, root=sys.argv[2], quiet=True)
+cold = run_campaign(campaign, workers=2, root=sys.argv[3], quiet=True, warm_workers=False)
+print(warm.run_id, cold.run_id)
+"""
+
+
+def test_warm_and_cold_workers_store_the_same_rows(tmp_path):
+    """Cases forked from the template (which read their scenarios and references once) store
+    what fresh interpreters store; bricard on Exudyn fails, so its reason is labelled from the
+    reference's conditioning."""
+    text = TINY.replace('"slider_crank_planar"', '"bricard"').replace('"mujoco"', '"exudyn"')
+    path = write_campaign(tmp_path, "tiny", text)
+    done = subprocess.run([sys.executable, "-c", WARM_AND_COLD, str(path), str(tmp_path / "warm"),
+                           str(tmp_path / "cold")], capture_output=True, text=True, check=True)
+    warm, cold = (RunStore.open(run_id, tmp_path / root)
+                  for run_id, root in zip(done.stdout.split(), ("warm", "cold")))
+    rows = metric_rows(warm)
+    assert len(rows) == 4 and (rows["status"] == "ok").any() and (rows["status"] != "ok").any()
+    # The same code on the same machine, forked or fresh: identical, bit for bit.
+    pd.testing.assert_frame_equal(rows, metric_rows(cold), check_exact=True)
 
 
 def test_failures_become_rows_and_the_campaign_completes(tmp_path, results):
