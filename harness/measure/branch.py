@@ -32,6 +32,7 @@ import numpy as np
 from harness.model.mechanism import GROUND, Mechanism
 from harness.model.outputs import body_rotations, joint_angle, joint_slide
 from harness.model.trajectory import Trajectory
+from harness.measure.per_reference import per_reference, read_only
 
 #: At most this many reference samples are used to test the premise (an even stride through it).
 PREMISE_SAMPLES = 2000
@@ -145,21 +146,55 @@ def branch_distance(mech: Mechanism, trajectory: Trajectory, reference: Trajecto
     reference's own visits to one driver value differ by more (see the module docstring).
     """
     values, period = driver_series(mech, trajectory)
-    ref_values, _ = driver_series(mech, reference)
-    u = _unwrapped(ref_values, period)
-    ref_markers, body_of = markers(mech, reference)
-    stride = max(1, reference.n_samples // PREMISE_SAMPLES)
-    spread, where = _distances(u, ref_markers, ref_values[::stride], ref_markers[::stride],
-                               period, nearest=False)
-    if spread.max() > limit:
-        k = int(spread.argmax())
+    side = reference_side(mech, reference)
+    if side.spread.max() > limit:
+        k = int(side.spread.argmax())
         n = len(trajectory.times)
         return BranchCheck(np.full(n, np.inf), np.zeros(n, dtype=int),
                            f"the reference's configuration is not a function of the driver "
                            f"{mech.initial.driver} (two of its visits to the driver value at "
-                           f"t = {reference.times[k * stride]:.6g} s differ by {spread[k]:.3g} m "
-                           f"at body {mech.bodies[body_of[where[k]]].name}: more than one degree "
-                           "of freedom, or a reference that changes branch)")
+                           f"t = {reference.times[k * side.stride]:.6g} s differ by "
+                           f"{side.spread[k]:.3g} m at body "
+                           f"{mech.bodies[side.body_of[side.where[k]]].name}: more than one "
+                           "degree of freedom, or a reference that changes branch)")
     run_markers, _ = markers(mech, trajectory)
-    distance, marker = _distances(u, ref_markers, values, run_markers, period, nearest=True)
-    return BranchCheck(distance, body_of[marker])
+    distance, marker = _distances(side.u, side.markers, values, run_markers, period, nearest=True)
+    return BranchCheck(distance, side.body_of[marker])
+
+
+@dataclass(frozen=True)
+class ReferenceSide:
+    """What :func:`branch_distance` derives from the reference alone (arrays read-only).
+
+    Attributes
+    ----------
+    u : ndarray, shape (n,)
+        The reference's driver series, unwrapped (rad or m).
+    markers : ndarray, shape (n, k, 3)
+        Its markers (:func:`markers`), m; ``body_of`` (k,) the body of each.
+    stride : int
+        Every ``stride``-th sample tests the premise.
+    spread, where : ndarray, shape (n // stride,)
+        Largest distance between the reference's visits to each premise sample's driver value,
+        m, and the marker index of it.
+    """
+
+    u: np.ndarray
+    markers: np.ndarray
+    body_of: np.ndarray
+    stride: int
+    spread: np.ndarray
+    where: np.ndarray
+
+
+@per_reference
+def reference_side(mech: Mechanism, reference: Trajectory) -> ReferenceSide:
+    """The reference's part of :func:`branch_distance`, and the test of its premise."""
+    values, period = driver_series(mech, reference)
+    u = _unwrapped(values, period)
+    ref_markers, body_of = markers(mech, reference)
+    stride = max(1, reference.n_samples // PREMISE_SAMPLES)
+    spread, where = _distances(u, ref_markers, values[::stride], ref_markers[::stride], period,
+                               nearest=False)
+    return ReferenceSide(*(read_only(array) for array in (u, ref_markers, body_of)), stride,
+                          read_only(spread), read_only(where))

@@ -37,6 +37,7 @@ from harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mech
 from harness.model.outputs import body_frame, body_rotations, joint_angle, joint_slide, wrap_angle
 from harness.model.timegrid import reference_indices
 from harness.model.trajectory import BodyStates, Trajectory
+from harness.measure.per_reference import per_reference, read_only
 
 #: Degree of the spline through sampled power (odd, so not-a-knot ends are symmetric).
 QUADRATURE_DEGREE = 9
@@ -116,6 +117,13 @@ def _power(mech, force, state: dict) -> np.ndarray:
 def _quadrature_loads(mech: Mechanism) -> list:
     return [f for f in mech.forces if not _has_work_coordinate(mech, f)
             and (isinstance(f, BodyTorque) or f.damping > 0)]
+
+
+def has_quadrature_loads(mech: Mechanism) -> bool:
+    """Whether ``mech`` has loads whose work is integrated by quadrature (body torques, dampers):
+    then :func:`energy_balance` takes the reference's work of them
+    (:func:`reference_quadrature_work`)."""
+    return bool(_quadrature_loads(mech))
 
 
 def interval_work(mech: Mechanism, start: dict, end: dict, dt) -> np.ndarray:
@@ -224,17 +232,26 @@ def energy_balance(mech: Mechanism, trajectory: Trajectory,
     state = state_arrays(trajectory)
     energy = mechanical_energy(mech, state)
     baseline = None
-    if reference is not None and _quadrature_loads(mech):
+    if reference is not None and has_quadrature_loads(mech):
         index = reference_indices(reference, trajectory.times)
-        reference_state = state_arrays(reference)
-        reference_energy = mechanical_energy(mech, reference_state)
-        reference_work = (reference_energy - reference_energy[0]
-                          - coordinate_work(mech, reference_state, reference.n_samples))
-        baseline = (reference_work[index] - reference_work[index[0]],
-                    dissipative_power(mech, reference_state)[index])
+        reference_work, reference_power = reference_quadrature_work(mech, reference)
+        baseline = (reference_work[index] - reference_work[index[0]], reference_power[index])
     return energy - cumulative_work(mech, trajectory.times, state, baseline) - energy[0]
 
 
+@per_reference
+def reference_quadrature_work(mech: Mechanism, reference: Trajectory
+                               ) -> tuple[np.ndarray, np.ndarray]:
+    """The reference's work of the quadrature loads at every sample, W_b = T + V − (T₀ + V₀) −
+    (work of the loads with a work coordinate), J, and their power, W, each shape (n_samples,):
+    :func:`energy_balance`'s baseline."""
+    state = state_arrays(reference)
+    energy = mechanical_energy(mech, state)
+    work = energy - energy[0] - coordinate_work(mech, state, reference.n_samples)
+    return read_only(work), read_only(dissipative_power(mech, state))
+
+
+@per_reference
 def energy_scale(mech: Mechanism, reference: Trajectory) -> float | None:
     """The energy that relative energy errors are divided by, J.
 

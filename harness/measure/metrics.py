@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from harness.measure.energy import energy_balance, energy_scale
+from harness.measure.per_reference import per_reference, read_only
 from harness.neutral.equations import JointEquations
 from harness.model.mechanism import GROUND, Mechanism
 from harness.model.outputs import output_series
@@ -124,8 +125,16 @@ def case_metrics(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
         metrics["max_energy_error_rel"] = (None if scale is None
                                            else metrics["max_energy_error_J"] / scale)
         index = reference_indices(reference, trajectory.times)
+        expected = reference_outputs(mech, reference)
         metrics["output_errors"] = {
             o.name: float(np.abs(output_series(mech, trajectory, o.name)
-                                 - output_series(mech, reference, o.name)[index]).max())
+                                 - expected[o.name][index]).max())
             for o in mech.outputs}
     return metrics
+
+
+@per_reference
+def reference_outputs(mech: Mechanism, reference: Trajectory) -> dict[str, np.ndarray]:
+    """Every output of ``mech`` along ``reference`` (:func:`output_series`), by name, each shape
+    (n_samples,), read-only: what :func:`case_metrics` compares a run's outputs with."""
+    return {o.name: read_only(output_series(mech, reference, o.name)) for o in mech.outputs}

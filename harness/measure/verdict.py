@@ -53,9 +53,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.measure.branch import BranchCheck, branch_distance, markers
-from harness.measure.energy import energy_balance, energy_scale
-from harness.measure.metrics import violation_series
+from harness.measure.branch import BranchCheck, branch_distance, markers, reference_side
+from harness.measure.energy import energy_balance, energy_scale, has_quadrature_loads, \
+    reference_quadrature_work
+from harness.measure.metrics import reference_outputs, violation_series
 from harness.model.mechanism import Mechanism, characteristic_length
 from harness.model.outputs import rotation_between
 from harness.model.timegrid import TIME_MATCH, reference_indices
@@ -262,6 +263,18 @@ def _stick_checks(mech, trajectory, reference, bounds, notes) -> list[Check]:
         checks += [_branch_check(mech, trajectory, reference, bounds, notes),
                    _trajectory_check(mech, trajectory, reference, bounds, notes)]
     return [check for check in checks if check is not None]
+
+
+def prepare_reference(mech: Mechanism, reference: Trajectory) -> None:
+    """Compute now what judging and measuring a run of ``mech`` derive from ``reference`` alone
+    (the energy scale and baseline, the branch check's reference side, the outputs); kept for a
+    frozen reference (:mod:`harness.measure.per_reference`), so that the warm template computes
+    them once for every case forked from it."""
+    energy_scale(mech, reference)
+    if has_quadrature_loads(mech):
+        reference_quadrature_work(mech, reference)
+    reference_side(mech, reference)
+    reference_outputs(mech, reference)
 
 
 def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None = None,

@@ -73,11 +73,15 @@ def _warm_up() -> list[str]:
 
 def _keep_scenarios() -> list[str]:
     """Read the scenarios :data:`~harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
-    references, inside :func:`harness.common.kept_files.keeping`, so the cases forked from here
-    find them read (a reference that is not stored yet is not built: its cases read or build it
-    as a cold worker does).  Returns what could not be read."""
+    references, inside :func:`harness.common.kept_files.keeping`, assemble each scene's start
+    (:func:`harness.neutral.start.initial_state`, cached per scene) and compute what the measuring
+    stick derives from each reference alone (:func:`harness.measure.verdict.prepare_reference`),
+    so the cases forked from here find them done (a reference that is not stored yet is not
+    built: its cases read or build it as a cold worker does).  Returns what could not be read."""
     from harness.common.kept_files import keeping
+    from harness.measure.verdict import prepare_reference
     from harness.model import scenario
+    from harness.neutral.start import initial_state
     from harness.run.executor import WARM_SCENARIOS_ENV
     from harness.store.reference_files import read_reference
 
@@ -85,7 +89,11 @@ def _keep_scenarios() -> list[str]:
     with keeping():
         for name in json.loads(os.environ.get(WARM_SCENARIOS_ENV) or "[]"):
             try:
-                read_reference(scenario.load(name))
+                mech = scenario.load(name)
+                initial_state(mech)
+                stored = read_reference(mech)
+                if stored is not None:
+                    prepare_reference(mech, stored[0])
             except Exception as error:  # noqa: BLE001 — its cases report it themselves
                 missed.append(f"scenario {name}: {error}")
     return missed

@@ -1,0 +1,95 @@
+"""What the stick derives from a reference alone, kept per frozen reference
+(harness/measure/per_reference.py): kept only for a read-only reference, per object and mechanism,
+bounded, read-only itself, and it changes no verdict or metric."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from adapters import get_adapter
+from harness.measure import per_reference as memo
+from harness.measure.metrics import case_metrics, reference_outputs
+from harness.measure.verdict import judge, prepare_reference
+from harness.model import scenario
+from harness.references.build import reference_trajectory
+from harness.run.case import simulate_case
+
+#: Trajectory arrays (the reference store returns them read-only).
+ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")
+
+
+def writable_copy(reference):
+    return dataclasses.replace(reference, **{name: getattr(reference, name).copy()
+                                             for name in ARRAYS})
+
+
+@pytest.fixture(scope="module")
+def fourbar():
+    mech = scenario.load("fourbar")
+    return mech, reference_trajectory(mech)
+
+
+def counting(calls: list):
+    @memo.per_reference
+    def derived(mech, reference, *args):
+        calls.append(args)
+        return len(calls)
+    return derived
+
+
+def test_stored_references_are_frozen_and_copies_are_not(fourbar):
+    _, reference = fourbar
+    assert memo.is_frozen(reference)
+    assert not memo.is_frozen(writable_copy(reference))
+
+
+def test_a_value_is_kept_per_frozen_reference_object_and_arguments(fourbar):
+    mech, reference = fourbar
+    calls = []
+    derived = counting(calls)
+    assert derived(mech, reference) == derived(mech, reference) == 1
+    assert derived(mech, reference, 2.0) == 2  # other arguments: another value
+    frozen_twin = dataclasses.replace(reference)  # the same arrays, another object
+    assert derived(mech, frozen_twin) == 3
+    copy = writable_copy(reference)
+    assert derived(mech, copy) == 4 and derived(mech, copy) == 5  # never kept
+    other = scenario.load("slider_crank")
+    assert derived(other, reference) == 6  # another mechanism
+
+
+def test_the_oldest_values_leave_first(fourbar, monkeypatch):
+    mech, reference = fourbar
+    monkeypatch.setattr(memo, "MAX_ENTRIES", 2)
+    calls = []
+    derived = counting(calls)
+    for argument in (1, 2, 3):
+        derived(mech, reference, argument)
+    derived(mech, reference, 3)
+    derived(mech, reference, 1)
+    assert calls == [(1,), (2,), (3,), (1,)]
+
+
+def test_kept_arrays_are_read_only(fourbar):
+    mech, reference = fourbar
+    prepare_reference(mech, reference)
+    for series in reference_outputs(mech, reference).values():
+        with pytest.raises(ValueError):
+            series[0] = 0.0
+
+
+def test_a_frozen_reference_gives_the_verdict_and_metrics_of_a_writable_copy(fourbar):
+    """The kept values are the values: judging against the stored reference (kept, asked twice)
+    and against a writable copy of it (never kept) agree bit for bit."""
+    mech, reference = fourbar
+    run = simulate_case(get_adapter("inhouse"), mech, "rk4+baumgarte", 1e-2, 1.0)
+    prepare_reference(mech, reference)
+    results = []
+    for against in (reference, reference, writable_copy(reference)):
+        judged = judge(mech, run, against)
+        results.append((judged.status, judged.reason, judged.notes,
+                        case_metrics(mech, judged, against)))
+    assert results[0] == results[1] == results[2]
+    assert np.isfinite(results[0][3]["max_energy_error_rel"])
