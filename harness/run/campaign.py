@@ -7,8 +7,9 @@ Stages of :func:`run_campaign`, in order:
    cases run without one (their rows say ``reference = "none: <reason>"``);
 2. the run folder is created, or reopened with ``resume`` (its stored cases are skipped);
 3. the machine-speed figure (:mod:`harness.common.machine_speed`: a fixed numpy and scipy
-   workload; locally in this process while the warm template starts, on a cluster as a case of
-   its own) is stored with the run (times of different runs compare as ratios to it);
+   workload) is measured in this process while the warm template starts, or else as the first
+   case of the next stage (:mod:`harness.run.calibration`), and stored with the run (times of
+   different runs compare as ratios to it);
 4. the cases run through :func:`harness.run.executor.execute` (one fresh process each) and are stored
    as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.runs.CaseCache`
    (same scenario content, engine version, method, step and duration, computed by the same code
@@ -29,7 +30,6 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
-import math
 import signal
 import sys
 import threading
@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from harness.model import scenario
 from harness.common.environment import code_fingerprint
 from harness.common.machine_speed import machine_speed_s, workload_name
+from harness.run.calibration import CALIBRATION, WithCalibration, store_figure
 from harness.run.executor import WorkerProcesses, execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.store.runs import CaseCache, RunLocked, RunStore
@@ -221,27 +222,6 @@ def _cache_settings(campaign) -> str:
                        "accuracy": campaign.accuracy}, sort_keys=True)
 
 
-def _calibrate(store: RunStore, backend: dict, say) -> None:
-    """Measure the run's machine-speed figure and store it: locally in this process, while the
-    warm template starts on another core; on a cluster as a case (:mod:`harness.run.calibration`)
-    on one of its workers, whose speed the cases get (a failed one is reported)."""
-    from harness.run.calibration import CALIBRATION, calibration_work
-
-    if backend["scheduler"] is None:
-        store.set_calibration(machine_speed_s(), workload_name())
-        return
-    rows = []
-    execute([CALIBRATION], calibration_work, workers=1, **backend,
-            on_result=lambda spec, row, trajectory: rows.append(row), progress=False)
-    row = rows[0]
-    seconds = row.get("wall_time_s")
-    if row.get("status") == "ok" and seconds is not None and math.isfinite(seconds) and seconds > 0:
-        store.set_calibration(seconds, row.get("workload"))
-    else:
-        say(f"mbh: calibration case ended {row.get('status')} ({row.get('reason')}); this run "
-            f"has no machine-speed figure")
-
-
 def _sweep(campaign, store: RunStore, work, workers, backend: dict, quiet: bool) -> None:
     """Run the campaign's stability sweep (searches with a stored row are skipped)."""
     from harness.run.spec import DEFAULT_TIMEOUT_S, CaseSpec
@@ -328,14 +308,18 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     names = {spec.scenario for spec in campaign.cases}
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)
-    if scheduler is None and warm_workers:
-        WorkerProcesses.start_template(names)  # its start overlaps the references' preparation
+    # The template's start overlaps the references' preparation and, when it starts now, the
+    # calibration in this process (harness.run.calibration).
+    template_starting = (scheduler is None and warm_workers
+                         and WorkerProcesses.start_template(names))
     prepare_references(names, say)
     backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)
     try:
-        if campaign.calibration and store.calibration_s is None:
-            _calibrate(store, backend, say)
+        calibrate = campaign.calibration and store.calibration_s is None
+        if calibrate and template_starting:
+            store.set_calibration(machine_speed_s(), workload_name())
+            calibrate = False
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]
         recorder = _Recorder(store, CaseCache(root), _cache_keys(
@@ -343,8 +327,16 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
             _cache_settings(campaign))
         if reuse:
             todo = recorder.reuse(todo)
-        execute(todo, work, workers=workers, **backend, on_result=recorder.record,
-                progress=not quiet)
+
+        def on_result(spec, row, trajectory):
+            if spec == CALIBRATION:
+                store_figure(store, row, say)
+            else:
+                recorder.record(spec, row, trajectory)
+
+        execute([CALIBRATION, *todo] if calibrate else todo,
+                WithCalibration(work) if calibrate else work, workers=workers, **backend,
+                on_result=on_result, progress=not quiet)
         if campaign.sweep is not None:
             _sweep(campaign, store, work, workers, backend, quiet)
         store.finish("complete")  # a stop while it writes leaves the run interrupted, not running

@@ -241,16 +241,21 @@ class WorkerProcesses:
         return cls._context
 
     @classmethod
-    def start_template(cls, scenarios: Iterable[str] = ()) -> None:
+    def start_template(cls, scenarios: Iterable[str] = ()) -> bool:
         """Start the warm template now, in the background, so that its imports and warm-up
-        (~1.5–2 s) overlap the caller's own preparation instead of delaying the first case.
+        (~2–2.5 s) overlap the caller's own preparation instead of delaying the first case.
         The template also reads ``scenarios`` (names or paths) and their stored references once,
         for every case forked from it (:data:`WARM_SCENARIOS_ENV`).  A template that is already
-        running is kept as it is; one that cannot start is left to :meth:`start`, which says so."""
+        running is kept as it is; one that cannot start is left to :meth:`start`, which says so.
+        Returns whether a template started now (so that this process has time to spare)."""
         cls._fork_context()
+        server = multiprocessing.forkserver._forkserver
+        before = getattr(server, "_forkserver_pid", None)
         with contextlib.suppress(OSError, EOFError, ValueError), \
                 _environment({WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios)))}):
             multiprocessing.forkserver.ensure_running()
+            return getattr(server, "_forkserver_pid", None) not in (None, before)
+        return False
 
     def start(self, work: Callable, spec, result_path: Path):
         """Start the worker of one case.  Raises _Stopped after :meth:`close`."""
