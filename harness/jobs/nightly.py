@@ -49,7 +49,8 @@ from pathlib import Path
 import pandas as pd
 
 from harness.run.spec import load_campaign
-from harness.run.campaign import CaseWork, run_campaign
+from harness.run.campaign import run_campaign
+from harness.run.row import CaseWork
 from harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
 from harness.store.compare import comparable_calibrations, compare_runs
@@ -86,7 +87,7 @@ SUMMARY_LINES = 30
 
 
 def case_work(campaign):
-    """The work function every case of a nightly runs (:class:`harness.run.campaign.CaseWork` with the
+    """The work function every case of a nightly runs (:class:`harness.run.row.CaseWork` with the
     campaign's bounds and accuracy).  Tests replace it (pytest ``monkeypatch``) to inject a
     regression; nothing else does."""
     return CaseWork(campaign.bounds, campaign.accuracy)

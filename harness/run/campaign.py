@@ -33,17 +33,16 @@ import json
 import signal
 import sys
 import threading
-from dataclasses import dataclass
 
 from harness.model import scenario
 from harness.common.environment import code_fingerprint
 from harness.common.machine_speed import machine_speed_s, workload_name
 from harness.run.calibration import CALIBRATION, WithCalibration, store_figure
+from harness.run.row import CaseWork
 from harness.run.executor import WorkerProcesses, execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
 from harness.store.runs import CaseCache, RunLocked, RunStore
 from harness.run.sweep import bisections, stability_sweep
-from harness.measure.verdict import Bounds
 from harness.common.errors import MbhError
 
 
@@ -96,23 +95,6 @@ def stop_signals_interrupt():
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
-
-
-@dataclass(frozen=True)
-class CaseWork:
-    """The work a worker process does for one spec: :func:`harness.run.row.run_spec`.
-
-    Picklable (module-level class of plain fields), so it can be sent to worker processes.
-    """
-
-    bounds: Bounds
-    accuracy: float
-
-    def __call__(self, spec):
-        from harness.run.row import run_spec
-
-        outcome = run_spec(spec, self.bounds, self.accuracy)
-        return outcome.row, outcome.trajectory
 
 
 def timed_workers(requested: int | None, say=print) -> int:
@@ -266,7 +248,7 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     quiet : bool
         No progress bar and no notes on stderr.
     work : callable, optional
-        ``work(spec) -> (row, trajectory)`` run in the workers; default :class:`CaseWork` with
+        ``work(spec) -> (row, trajectory)`` run in the workers; default :class:`~harness.run.row.CaseWork` with
         the campaign's bounds and accuracy.
     warm_workers : bool
         Locally, fork each case's process from the warm template (default) rather than start a

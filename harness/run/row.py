@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import statistics
+from dataclasses import dataclass
 
 import numpy as np
 import scipy
@@ -105,6 +106,25 @@ def _metric_columns(metrics: dict, mech: Mechanism) -> dict:
     for name, value in metrics.get("outputs", {}).items():
         row[f"final_{name}"] = value
     return row
+
+
+@dataclass(frozen=True)
+class CaseWork:
+    """The work a worker process does for one spec: :func:`run_spec`, returning
+    ``(row, trajectory)``.
+
+    Picklable (module-level class of plain fields), so it can be sent to worker processes.  It
+    lives here, not with the campaign runner, because unpickling it imports its module in every
+    case's process: the runner's module imports the result store (pandas, pyarrow), which no case
+    needs (0.37 s a case).
+    """
+
+    bounds: Bounds
+    accuracy: float
+
+    def __call__(self, spec: CaseSpec) -> tuple[dict, Trajectory | None]:
+        outcome = run_spec(spec, self.bounds, self.accuracy)
+        return outcome.row, outcome.trajectory
 
 
 def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,

@@ -18,7 +18,7 @@ from pathlib import Path
 from harness import cli
 
 from harness.jobs import nightly
-from harness.run.campaign import CaseWork
+from harness.run.row import CaseWork
 from harness.store.runs import list_runs
 from tests.helpers import ROOT
 

@@ -24,7 +24,7 @@ import pytest
 
 from harness import cli
 from harness.jobs import nightly
-from harness.run.campaign import CaseWork
+from harness.run.row import CaseWork
 from harness.store.runs import list_runs
 from tests.helpers import run_mbh
 

@@ -24,7 +24,8 @@ import pytest
 from adapters import adapter_names
 from harness.common import environment
 from harness.run.spec import load_campaign
-from harness.run.campaign import CaseWork, run_campaign
+from harness.run.campaign import run_campaign
+from harness.run.row import CaseWork
 from harness.model.timegrid import EVALUATION_STEP
 from harness.store.runs import RunStore, list_runs
 from harness.run.sweep import Bisection, stability_sweep
