@@ -1,4 +1,5 @@
-"""The machine-speed figure: what it times, and that runs compare only under the same workload."""
+"""The machine-speed figure: what it times, that runs compare only under the same workload, and
+how an execution carries the calibration beside its cases."""
 
 from __future__ import annotations
 
@@ -8,7 +9,8 @@ import numpy as np
 import scipy
 
 from harness.common.machine_speed import machine_speed_s, workload_name
-from harness.run.calibration import CALIBRATION, calibration_work
+from harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
+from harness.run.spec import CaseSpec
 from harness.store.compare import comparable_calibrations
 from harness.store.runs import RunStore
 
@@ -48,3 +50,25 @@ def test_figures_of_different_workloads_are_not_compared(tmp_path):
     b.set_calibration(0.3)
     assert (a.calibration_s, b.calibration_s) == (0.2, 0.3)
     assert comparable_calibrations(a, b) == (None, None)
+
+
+def test_an_execution_with_the_calibration_routes_it_and_the_cases_apart():
+    other = CaseSpec("fourbar", "inhouse", "best", 1e-2, 0.2)
+    work = WithCalibration(lambda spec: ({"case_id": spec.case_id, "status": "case"}, None))
+    row, _ = work(CALIBRATION)
+    assert row["workload"] == workload_name() and row["wall_time_s"] > 0
+    assert work(other)[0] == {"case_id": other.case_id, "status": "case"}
+
+
+def test_a_calibration_that_fails_leaves_the_run_without_a_figure_and_says_so(tmp_path):
+    said = []
+    failed = RunStore.create(_Campaign(), tmp_path)
+    store_figure(failed, {"status": "crashed", "reason": "worker process killed by SIGKILL",
+                          "wall_time_s": float("nan")}, said.append)
+    assert failed.calibration_s is None
+    assert said == ["mbh: calibration case ended crashed (worker process killed by SIGKILL); "
+                    "this run has no machine-speed figure"]
+    measured = RunStore.create(_Campaign(), tmp_path)
+    store_figure(measured, {"status": "ok", "wall_time_s": 0.16, "workload": workload_name()},
+                 said.append)
+    assert measured.calibration_s == 0.16 and len(said) == 1
