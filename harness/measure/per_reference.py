@@ -9,9 +9,9 @@ which reads the reference once and computes these once (:func:`prepare`), so the
 
 A value is kept only for a reference whose arrays are all read-only, as the reference store
 returns them (:func:`harness.store.reference_files.read_unchecked`): a trajectory that can change
-could make a kept value stale.  Values are keyed by the function, the mechanism's content hash
-(equal hashes: equal mechanisms) and the reference object itself, and are the values the function
-returns; the last :data:`MAX_ENTRIES` are kept.
+could make a kept value stale.  Values are keyed by the reference object itself, the function
+and the mechanism's content hash (equal hashes: equal mechanisms), and are the values the function
+returns; those of the last :data:`MAX_REFERENCES` references used are kept.
 """
 
 from __future__ import annotations
@@ -27,12 +27,14 @@ from harness.model.trajectory import Trajectory
 
 T = TypeVar("T")
 
-#: Values kept at most (a campaign judges against one reference per scene).
-MAX_ENTRIES = 256
+#: References whose values are kept at most (the least recently used leave first).  Each holds
+#: its reference alive, a few MB for a long reference; a campaign has one per scene (10 in each
+#: shipped campaign).
+MAX_REFERENCES = 24
 
-#: (function, content hash, id(reference), other arguments) → (reference, value); the reference
-#: is held so that its id cannot be reused by another object while its entry is kept.
-_KEPT: OrderedDict[tuple, tuple[Trajectory, object]] = OrderedDict()
+#: id(reference) → (reference, {(function, content hash, other arguments): value}); the reference
+#: is held so that its id cannot be reused by another object while its values are kept.
+_KEPT: OrderedDict[int, tuple[Trajectory, dict]] = OrderedDict()
 
 #: The arrays of a trajectory that must all be read-only for its values to be kept.
 ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")
@@ -57,15 +59,15 @@ def per_reference(function: Callable[..., T]) -> Callable[..., T]:
     def kept(mech: Mechanism, reference: Trajectory, *args):
         if not mech.content_hash or not is_frozen(reference):
             return function(mech, reference, *args)
-        key = (function.__qualname__, mech.content_hash, id(reference), args)
-        entry = _KEPT.get(key)
-        if entry is not None and entry[0] is reference:
-            _KEPT.move_to_end(key)
-            return entry[1]
-        value = function(mech, reference, *args)
-        _KEPT[key] = (reference, value)
-        while len(_KEPT) > MAX_ENTRIES:
-            _KEPT.popitem(last=False)
-        return value
+        entry = _KEPT.get(id(reference))
+        if entry is None or entry[0] is not reference:
+            entry = _KEPT[id(reference)] = (reference, {})
+            while len(_KEPT) > MAX_REFERENCES:
+                _KEPT.popitem(last=False)
+        _KEPT.move_to_end(id(reference))
+        key = (function.__qualname__, mech.content_hash, args)
+        if key not in entry[1]:
+            entry[1][key] = function(mech, reference, *args)
+        return entry[1][key]
 
     return kept

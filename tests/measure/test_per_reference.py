@@ -60,16 +60,18 @@ def test_a_value_is_kept_per_frozen_reference_object_and_arguments(fourbar):
     assert derived(other, reference) == 6  # another mechanism
 
 
-def test_the_oldest_values_leave_first(fourbar, monkeypatch):
+def test_the_values_of_the_least_recently_used_reference_leave_first(fourbar, monkeypatch):
     mech, reference = fourbar
-    monkeypatch.setattr(memo, "MAX_ENTRIES", 2)
+    monkeypatch.setattr(memo, "MAX_REFERENCES", 2)
+    twins = [dataclasses.replace(reference) for _ in range(3)]  # frozen, distinct objects
     calls = []
     derived = counting(calls)
-    for argument in (1, 2, 3):
-        derived(mech, reference, argument)
-    derived(mech, reference, 3)
-    derived(mech, reference, 1)
-    assert calls == [(1,), (2,), (3,), (1,)]
+    for twin in twins:
+        derived(mech, twin, "a")
+    derived(mech, twins[2], "a")  # kept
+    derived(mech, twins[1], "b")  # kept reference, new value
+    derived(mech, twins[0], "a")  # the first left when the third came
+    assert calls == [("a",)] * 3 + [("b",), ("a",)]
 
 
 def test_kept_arrays_are_read_only(fourbar):
