@@ -248,8 +248,8 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     quiet : bool
         No progress bar and no notes on stderr.
     work : callable, optional
-        ``work(spec) -> (row, trajectory)`` run in the workers; default :class:`~harness.run.row.CaseWork` with
-        the campaign's bounds and accuracy.
+        ``work(spec) -> (row, trajectory)`` run in the workers; default
+        :class:`~harness.run.row.CaseWork` with the campaign's bounds and accuracy.
     warm_workers : bool
         Locally, fork each case's process from the warm template (default) rather than start a
         fresh interpreter per case (:class:`harness.run.executor.WorkerProcesses`).

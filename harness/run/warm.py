@@ -1,6 +1,6 @@
 """The template every warm worker is forked from: imported once by the fork server
-(:mod:`multiprocessing.forkserver`, the ``preload`` of :class:`harness.run.executor.WorkerProcesses`),
-it sets the one-thread environment, imports numpy, scipy, the harness and every registered engine,
+(:mod:`multiprocessing.forkserver`, the ``preload`` of
+:class:`harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy, scipy, the harness and every registered engine,
 runs a few tiny cases so the compiled in-house kernels are loaded from numba's cache, and reads the
 campaign's scenarios and their stored references (:mod:`harness.common.kept_files`).  Each
 case's process is then forked from this state: a fresh process per case (a crash stays a row) that
