@@ -1,10 +1,12 @@
 """The template every warm worker is forked from: imported once by the fork server
 (:mod:`multiprocessing.forkserver`, the ``preload`` of
-:class:`harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy, scipy, the harness and every registered engine,
-runs a few tiny cases so the compiled in-house kernels are loaded from numba's cache, and reads the
-campaign's scenarios and their stored references (:mod:`harness.common.kept_files`).  Each
-case's process is then forked from this state: a fresh process per case (a crash stays a row) that
-starts in milliseconds instead of seconds (docs/speed.md, "Worker start").
+:class:`harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy,
+scipy, the harness and every registered engine, runs a few tiny cases so the compiled in-house
+kernels are loaded from numba's cache, and reads the campaign's scenarios and their stored
+references (:mod:`harness.common.kept_files`), assembles their starts and computes what the
+measuring stick derives from each reference alone.  Each case's process is then forked from this
+state: a fresh process per case (a crash stays a row) that starts in milliseconds instead of
+seconds (docs/speed.md, "Worker start").
 
 Nothing here changes a result: the warm-up cases are thrown away, and every module-level cache they
 fill (compiled code, loaded references) holds what a cold worker computes or loads for itself.
