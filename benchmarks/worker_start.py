@@ -4,7 +4,9 @@ ones (a fresh interpreter per case), measured side by side in one run, and the r
 Run:  .venv/bin/python benchmarks/worker_start.py [CAMPAIGN] [--repeats N] [--workers W]
 
 Each repeat runs the campaign (default ``smoke``) once warm and once cold, alternately, into
-temporary results roots, with the campaign's calibration case.  The overhead of a run is
+temporary results roots, with the campaign's machine-speed figure.  The first warm run starts the
+template, which the later ones find running: a one-off ``mbh run`` pays what the first run pays, a
+process that runs campaign after campaign what the later ones pay.  The overhead of a run is
 (campaign wall time × workers − Σ case wall times) / cases, s per case: everything that is not
 the engines' own stepping (process start, imports, loading compiled code and references, the
 measuring stick, storing).  The script prints each run's overhead, the medians and their ratio,
