@@ -12,10 +12,10 @@ such change although no engine had changed.
 The workload mixes the two kinds of work a case does: small numpy arrays driven from Python
 (:func:`scipy.integrate.solve_ivp` on a pendulum) and compiled dense algebra (LU solves of a stack
 of 24 × 24 systems, the size of a planar mechanism's); its matrices are too small for BLAS to use
-threads.  A local campaign measures it in its own process while the warm template starts (version
-2; version 1 ran it in a fresh interpreter, ~2 % slower on the development machine: 169.1 against
-166.0 ms, medians of 6 alternating figures); on a Dask cluster it runs as a case on a worker
-(:mod:`harness.run.calibration`).
+threads.  A campaign measures it beside one busy core: in its own process while the warm template
+starts, else as the first case of its execution (:mod:`harness.run.calibration`; version 2;
+version 1 ran it in a fresh interpreter before the cases, ~2 % slower on the development machine:
+169.1 against 166.0 ms, medians of 6 alternating figures).
 """
 
 from __future__ import annotations

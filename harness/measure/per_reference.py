@@ -3,9 +3,10 @@ reference and kept.
 
 Every case of a scene is judged against the same reference, and the stick derived the same
 figures from it in every case: the energy scale (twice: verdict and metrics), the reference's
-energy-balance baseline, its driver series and markers and the branch check's premise.  In a
-campaign each case runs in a process forked from the warm template (:mod:`harness.run.warm`),
-which reads the reference once and computes these once (:func:`prepare`), so the cases find them.
+energy-balance baseline, its driver series and markers, the branch check's premise and its
+outputs.  In a campaign each case runs in a process forked from the warm template
+(:mod:`harness.run.warm`), which reads the reference once and computes these once
+(:func:`harness.measure.verdict.prepare_reference`), so the cases find them.
 
 A value is kept only for a reference whose arrays are all read-only, as the reference store
 returns them (:func:`harness.store.reference_files.read_unchecked`): a trajectory that can change

@@ -36,8 +36,7 @@ import threading
 
 from harness.model import scenario
 from harness.common.environment import code_fingerprint
-from harness.common.machine_speed import machine_speed_s, workload_name
-from harness.run.calibration import CALIBRATION, WithCalibration, store_figure
+from harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
 from harness.run.row import CaseWork
 from harness.run.executor import WorkerProcesses, execute, usable_cores
 from harness.references.build import ReferenceBuildError, reference_trajectory
@@ -300,7 +299,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     try:
         calibrate = campaign.calibration and store.calibration_s is None
         if calibrate and template_starting:
-            store.set_calibration(machine_speed_s(), workload_name())
+            store_figure(store, calibration_work(CALIBRATION)[0], say)
             calibrate = False
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]

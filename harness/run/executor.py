@@ -243,7 +243,7 @@ class WorkerProcesses:
     @classmethod
     def start_template(cls, scenarios: Iterable[str] = ()) -> bool:
         """Start the warm template now, in the background, so that its imports and warm-up
-        (~2–2.5 s) overlap the caller's own preparation instead of delaying the first case.
+        (~1.5–1.8 s) overlap the caller's own preparation instead of delaying the first case.
         The template also reads ``scenarios`` (names or paths) and their stored references once,
         for every case forked from it (:data:`WARM_SCENARIOS_ENV`).  A template that is already
         running is kept as it is; one that cannot start is left to :meth:`start`, which says so.
