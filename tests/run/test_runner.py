@@ -1,8 +1,7 @@
 """Campaign runs end to end (harness.run.campaign, harness.run.sweep, ``mbh run/runs/show/compare``):
 the same rows through the process pool and a Dask LocalCluster, and from warm and cold workers,
-failures as rows, Ctrl-C and
-resume, a diverging method, a bad campaign file refused before anything runs, the stability
-sweep's bisection."""
+failures as rows, Ctrl-C and resume, a diverging method, a bad campaign file refused before
+anything runs, the stability sweep's bisection."""
 
 from __future__ import annotations
 
@@ -187,6 +186,7 @@ def test_warm_and_cold_workers_store_the_same_rows(tmp_path):
                            str(tmp_path / "cold")], capture_output=True, text=True, check=True)
     warm, cold = (RunStore.open(run_id, tmp_path / root)
                   for run_id, root in zip(done.stdout.split(), ("warm", "cold")))
+    assert "warm workers unavailable" not in done.stderr  # the first run forked its cases
     rows = metric_rows(warm)
     assert len(rows) == 4 and (rows["status"] == "ok").any() and (rows["status"] != "ok").any()
     # The same code on the same machine, forked or fresh: identical, bit for bit.
