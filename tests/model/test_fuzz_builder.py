@@ -177,7 +177,7 @@ def builder_calls(draw) -> list[list]:
                     with np.errstate(all="ignore"):
                         try:
                             fields[key] = np.asarray(value, dtype=dtype)
-                        except OverflowError:  # an integer no int64 or double holds
+                        except (OverflowError, ValueError):  # no int64 holds it: big, inf or NaN
                             fields[key] = np.asarray(value, dtype=object)
         elif kind == "call":  # a new section call with random arguments
             method = draw(st.sampled_from(SECTIONS))
