@@ -307,28 +307,28 @@ class Stepper(abc.ABC):
         times, states = [], []
         last_good, wall, read_back = 0.0, 0.0, 0.0
         status, reason, failure_time = "ok", "", None
-        targets = list(grid.sample_times)
+        targets = np.asarray(grid.sample_times, dtype=float).tolist()  # floats, not numpy scalars
         if not targets or targets[-1] < grid.t_end * (1 - GRID_RTOL):
-            targets.append(grid.t_end)
+            targets.append(float(grid.t_end))
         try:
             for index, t in enumerate(targets):
                 began = time.perf_counter()
                 try:
-                    self._step_to(float(t))
+                    self._step_to(t)
                 finally:
                     wall += time.perf_counter() - began
                 began = time.perf_counter()
-                current = self._states(float(t))
+                current = self._states(t)
                 read_back += time.perf_counter() - began
                 broken = malformed(current, n_bodies)
                 if broken:
-                    raise _ContractBroken(f"_states({float(t):g}) {broken}")
+                    raise _ContractBroken(f"_states({t:g}) {broken}")
                 bad = divergence_reason(current) or self.divergence(current)
                 if bad:
                     raise _CheckFailed(bad)
-                last_good = float(t)
+                last_good = t
                 if index < len(grid.sample_times):
-                    times.append(float(t))
+                    times.append(t)
                     states.append(current)
         except _CheckFailed as error:
             status, reason, failure_time = "diverged", str(error), last_good

@@ -229,7 +229,7 @@ def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters
     return q_new, v_new
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _combine(q_out, v_out, q, v, stages, velocity_weight, h2, position_weights, h,
              velocity_weights):
     """q_out = q + (velocity_weight·v + Σ_j (h2·w̄_j)·k_j), v_out = v + Σ_j (h·w_j)·k_j over
@@ -272,11 +272,14 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
     return RUNNING
 
 
-@njit(cache=True)
-def _generated_stages(q, v, t, h, tableau, acceleration):
+@njit(cache=True, inline="always")
+def _generated_stages(q, v, t, h, tableau, acceleration, work):
     """The stages and update of :func:`_nystrom_step` (same operations, same bits) with every q̈
     from the generated right-hand side ``acceleration``; ``accepted`` False as soon as it declines
-    a call (the caller then runs :func:`_nystrom_step`).
+    a call (the caller then runs :func:`_nystrom_step`).  The stages go to the run's buffers
+    ``work`` (:func:`_step_buffers`), not to arrays of their own: with this function and
+    :func:`_combine` inlined, a pendulum's step took 0.47 µs instead of 0.84 µs
+    (docs/measurements.md, "In-house step cost").
 
     Returns
     -------
@@ -284,8 +287,7 @@ def _generated_stages(q, v, t, h, tableau, acceleration):
     accepted : bool
     """
     c, a, abar, b, bbar = tableau
-    stages = np.empty((c.shape[0], v.shape[0]))
-    q_stage, v_stage = np.empty(q.shape[0]), np.empty(v.shape[0])
+    stages, q_stage, v_stage = work[0], work[1], work[2]
     for i in range(c.shape[0]):
         _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
         if acceleration(q_stage, v_stage, t + c[i] * h, stages[i]) == 0:
@@ -296,9 +298,11 @@ def _generated_stages(q, v, t, h, tableau, acceleration):
 
 
 @njit(cache=True)
-def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated):
+def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
     """:func:`_project` by its generated parts alone (same operations, same bits): ``accepted``
     False as soon as one declines a call.
+
+    ``scratch`` (n + 1,): the run's buffer for the parts' outputs.
 
     Returns
     -------
@@ -312,7 +316,6 @@ def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated):
     accepted : bool
     """
     n = q.shape[0]
-    scratch = np.empty(n + 1)
     previous = np.inf
     iterations = 0
     for _ in range(proj_max_iter):
@@ -332,9 +335,9 @@ def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated):
     return q, scratch[:n].copy(), scratch[n], iterations, True
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projection, limit,
-                    indicators, measure_indicator, counters):
+                    indicators, measure_indicator, counters, work):
     """:func:`_step_and_check` by the generated functions alone, called without the model's tables:
     passing those ~40 arrays to the step's functions cost ~1 µs a step, more than a pendulum's
     four right-hand sides (docs/measurements.md, "In-house step cost").  The same operations as
@@ -344,11 +347,12 @@ def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projectio
     Partitioning always declines (its stages need :func:`expand`).
 
     ``measure_indicator``: ρ̂ is measured at the step's end (placed passages on).
+    ``work``: the run's buffers (:func:`_step_buffers`).
     """
     if stabilisation == PARTITIONED:
         return q, v, DECLINED
     q_new, v_new, accepted = _generated_stages(q, v, t, t_new - t, tableau,
-                                               generated[ACCELERATION])
+                                               generated[ACCELERATION], work)
     if not accepted:
         return q, v, DECLINED
     stages = tableau[0].shape[0]
@@ -356,14 +360,13 @@ def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projectio
     rho = 0.0
     if stabilisation == PROJECTED:
         q_new, v_new, rho, iterations, accepted = _generated_projection(
-            q_new, v_new, t_new, projection[0], projection[1], generated)
+            q_new, v_new, t_new, projection[0], projection[1], generated, work[3])
         jacobians += iterations + 1
         factorizations += iterations + 1
     elif measure_indicator:
-        scratch = np.empty(1)
-        accepted = generated[INDICATOR](q_new, v_new, t_new, scratch) == 1
+        accepted = generated[INDICATOR](q_new, v_new, t_new, work[3]) == 1
         jacobians += 1
-        rho = scratch[0]
+        rho = work[3][0]
     if not accepted:
         return q, v, DECLINED
     counters[RHS_EVALS] += stages
@@ -376,10 +379,29 @@ def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projectio
 
 
 @njit(cache=True)
+def _step_buffers(tableau, q, v):
+    """The buffers a run's generated steps write into, made once per run: the stages (s, n), a
+    stage's q and q̇ (n,) each, and the outputs of ρ̂ and the projection's parts (n + 1,)."""
+    return (np.empty((tableau[0].shape[0], v.shape[0])), np.empty(q.shape[0]),
+            np.empty(v.shape[0]), np.empty(q.shape[0] + 1))
+
+
+@njit(cache=True, inline="always")
+def _squared_norm(x):
+    """Σ x_i² of a vector (n,), summed in order: ``x @ x`` calls BLAS, whose call cost 45 ns,
+    ~7 % of a pendulum's step.  Its last bits may differ from BLAS's, which can matter only to
+    a state whose norm is within round-off of the divergence limit."""
+    total = 0.0
+    for value in x:
+        total += value * value
+    return total
+
+
+@njit(cache=True)
 def _checked(q, v, q_new, v_new, limit):
     """(q_new, v_new, RUNNING), or the old state (q, v) and the divergence code when the new one
     is not finite or its q or q̇ has a 2-norm over ``limit``."""
-    squared_q, squared_v = q_new @ q_new, v_new @ v_new
+    squared_q, squared_v = _squared_norm(q_new), _squared_norm(v_new)
     if not np.isfinite(squared_q + squared_v):
         return q, v, DIVERGED_NONFINITE
     if max(squared_q, squared_v) > limit * limit:
@@ -442,6 +464,7 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
     cost 0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).
     """
     placement, rho_zone, indicators, passages = passage
+    work = _step_buffers(tableau, q, v)
     k = first
     reached = 0
     while True:
@@ -479,7 +502,7 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
             k_end = k + 1
             q_new, v_new, status = _generated_step(
                 q, v, t, t0 + k_end * dt, tableau, model[GENERATED_STEP], stabilisation,
-                projection, limit, indicators, placement[0] > 0.0, counters)
+                projection, limit, indicators, placement[0] > 0.0, counters, work)
             if status == DECLINED:
                 q_new, v_new, status = _step_and_check(
                     q, v, t, t0 + k_end * dt, tableau, model, stabilisation, projection,

@@ -115,6 +115,8 @@ class CompiledStepper(FormulationStepper):
         self._partition = None
         self._restart(*self._start_state)
         self._samples: _Samples | None = None
+        #: Row of ``_samples`` holding the current state (None: ``q``, ``v`` hold it).
+        self._row: int | None = None
         #: Step index of every sample time and of the end, increasing (shape (k,)).
         self._sample_steps = np.unique(np.rint(np.append(grid.sample_times, grid.t_end)
                                                / grid.dt).astype(np.int64))
@@ -167,9 +169,13 @@ class CompiledStepper(FormulationStepper):
         self.q, self.v = q_full[independent].copy(), v_full[independent].copy()
 
     def _full(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Full (q, q̇) of the integrated state at its time ``t``."""
+        """Full (q, q̇) of the integrated state at its time ``t``: for every formulation but
+        partitioning the stored sample the last :meth:`_step_to` reached (row ``_row`` of the
+        call's output), else (q, v)."""
         if self._code != compiled.PARTITIONED:
-            return self.q, self.v
+            if self._row is None:
+                return self.q, self.v
+            return self._samples.q[self._row], self._samples.v[self._row]
         return compiled.expand(self.q, self.v, t, self._model[compiled.ROWS],
                                self._model[compiled.CONSTRAINT_ARGS],
                                self._partition, self._counters)
@@ -188,9 +194,15 @@ class CompiledStepper(FormulationStepper):
     def _step_to(self, t: float) -> None:
         target = self.grid.steps(t)
         if self._code != compiled.PARTITIONED:
-            if self._samples is None or not self._samples.covers(target):
-                self._samples = self._run_samples(self._targets_from(target))
-            self._take_sample(target)
+            samples = self._samples
+            row = None if samples is None else samples.rows.get(target)
+            if row is None:
+                if samples is None or not samples.failed_before(target):
+                    samples = self._samples = self._run_samples(self._targets_from(target))
+                    row = samples.rows.get(target)
+                if row is None:
+                    self._fail_at_end(samples)
+            self._row, self.steps, self.t_good = row, target, target * self.grid.dt
             return
         while True:
             self.q, self.v, self.steps, status = self._run(target)
@@ -225,17 +237,12 @@ class CompiledStepper(FormulationStepper):
         args = self._samples_args(targets)
         q, v, done, status, reached = self._entry(*args)
         q_out, v_out = args[-2:]
-        row = {step: k for k, step in enumerate(targets[:reached].tolist())}
-        return _Samples(row, q_out[:reached], v_out[:reached], (q, v, done, status))
+        rows = dict(zip(targets[:reached].tolist(), range(reached)))
+        return _Samples(rows, q_out, v_out, (q, v, done, status))
 
-    def _take_sample(self, target: int) -> None:
-        """Make the stored state of step ``target`` current, or raise the run's failure."""
-        samples = self._samples
-        index = samples.row.get(target)
-        if index is not None:
-            self.q, self.v, self.steps = samples.q[index], samples.v[index], target
-            self.t_good = target * self.grid.dt
-            return
+    def _fail_at_end(self, samples: _Samples) -> None:
+        """Make the last good state of ``samples`` current and raise the failure that ended it."""
+        self._row = None
         self.q, self.v, self.steps, status = samples.end
         self.t_good = self.steps * self.grid.dt
         raise RunFailure(*self._failure(status))
@@ -322,25 +329,25 @@ class _Samples:
 
     Attributes
     ----------
-    row : dict
-        Step index → row of ``q`` and ``v``, for the k steps reached (a dict lookup per sample
-        costs a tenth of a search in an array of the steps; the per-sample Python is the
-        in-house overhead at large steps).
+    rows : dict
+        Step index → row of ``q`` and ``v``, for the steps reached.  Reaching a sample is one
+        lookup and no array made (the row is cut out when the state is read): the per-sample
+        Python is the in-house cost at large steps (a pendulum at 1e-2 s spent as long on its
+        1,001 samples as on its 1,000 steps; docs/measurements.md, "In-house step cost").
     q, v : ndarray, shape (k, n)
-        The integrated state after each.
+        The integrated state after each target of the call (rows from ``len(rows)`` on unset).
     end : tuple
         (q, v, done, status) of the call: the last good state, its step and why it stopped.
     """
 
-    row: dict
+    rows: dict
     q: np.ndarray
     v: np.ndarray
     end: tuple
 
-    def covers(self, target: int) -> bool:
-        """Whether step ``target`` is stored or lies beyond the failure that ended the call."""
-        done, status = self.end[2], self.end[3]
-        return target in self.row or (status != compiled.RUNNING and target > done)
+    def failed_before(self, target: int) -> bool:
+        """Whether the call ended in a failure before step ``target``."""
+        return self.end[3] != compiled.RUNNING and target > self.end[2]
 
 
 def _no_partition() -> tuple:
