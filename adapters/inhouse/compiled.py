@@ -46,16 +46,17 @@ RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILE
 
 #: The members of the model tuple the compiled loop reads, by name: the Baumgarte gains (α, β),
 #: the constraint rows, the constraint kernels' arguments, the force kernels' arguments, the
-#: sparsity arrays of Φ_q, the generated functions, and the functions of the generated step
-#: (:func:`_generated_step`: the generated ones when every function the formulation calls was
+#: sparsity arrays of Φ_q, the generated functions, and the functions of the generated steps
+#: (:func:`_generated_run`: the generated ones when every function the formulation calls was
 #: generated, else :data:`~adapters.inhouse.generated.NOTHING`, so that a step never computes its
 #: stages twice).  numba folds these module constants into the tuple's indexing, so the names cost
 #: nothing; a named tuple in their place made the generated loop's step 2–3 % slower
 #: (docs/measurements.md, "Named model tuple").
 GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED, GENERATED_STEP = range(7)
 
-#: What :func:`_generated_step` returns when one of its functions declined a call (a guard, or
-#: :data:`~adapters.inhouse.generated.NEVER`): nothing was changed, the full step runs instead.
+#: What :func:`_generated_run` returns when one of its functions declined a call of the next step
+#: (a guard, or :data:`~adapters.inhouse.generated.NEVER`): nothing of that step was kept, the
+#: full step runs instead.
 DECLINED = -1
 
 #: Stabilisation codes of :func:`run_steps`.
@@ -272,31 +273,6 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
     return RUNNING
 
 
-@njit(cache=True, inline="always")
-def _generated_stages(q, v, t, h, tableau, acceleration, work):
-    """The stages and update of :func:`_nystrom_step` (same operations, same bits) with every q̈
-    from the generated right-hand side ``acceleration``; ``accepted`` False as soon as it declines
-    a call (the caller then runs :func:`_nystrom_step`).  The stages go to the run's buffers
-    ``work`` (:func:`_step_buffers`), not to arrays of their own: with this function and
-    :func:`_combine` inlined, a pendulum's step took 0.47 µs instead of 0.84 µs
-    (docs/measurements.md, "In-house step cost").
-
-    Returns
-    -------
-    q_new, v_new : ndarray, shape (n,)
-    accepted : bool
-    """
-    c, a, abar, b, bbar = tableau
-    stages, q_stage, v_stage = work[0], work[1], work[2]
-    for i in range(c.shape[0]):
-        _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
-        if acceleration(q_stage, v_stage, t + c[i] * h, stages[i]) == 0:
-            return q, v, False
-    q_new, v_new = np.empty(q.shape[0]), np.empty(v.shape[0])
-    _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
-    return q_new, v_new, True
-
-
 @njit(cache=True)
 def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
     """:func:`_project` by its generated parts alone (same operations, same bits): ``accepted``
@@ -335,55 +311,120 @@ def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
     return q, scratch[:n].copy(), scratch[n], iterations, True
 
 
-@njit(cache=True, inline="always")
-def _generated_step(q, v, t, t_new, tableau, generated, stabilisation, projection, limit,
-                    indicators, measure_indicator, counters, work):
-    """:func:`_step_and_check` by the generated functions alone, called without the model's tables:
-    passing those ~40 arrays to the step's functions cost ~1 µs a step, more than a pendulum's
-    four right-hand sides (docs/measurements.md, "In-house step cost").  The same operations as
-    :func:`_step_and_check` (the same bits), the counters and ρ̂ (``indicators``, (2,)) updated as
-    it updates them, but only when every call was accepted: otherwise it returns
-    :data:`DECLINED` having changed nothing, and the caller runs :func:`_step_and_check`.
-    Partitioning always declines (its stages need :func:`expand`).
+@njit(cache=True)
+def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabilisation,
+                   projection, limit, passage, counters, buffers, q_out, v_out):
+    """The steps of :func:`_advance` from step ``k`` on the generated functions alone, in one
+    flat loop that keeps the state at each target as :func:`_advance` does: the steps of
+    :func:`_step_and_check` (the same operations, so the same bits; the counters and ρ̂ updated
+    as it updates them) until the last target, a step before which a passage is planned
+    (:func:`plan_passage`), a step one of the functions declines, or a diverged step.
+    Partitioning is not run here (its stages need :func:`expand`).
 
-    ``measure_indicator``: ρ̂ is measured at the step's end (placed passages on).
-    ``work``: the run's buffers (:func:`_step_buffers`).
+    The loop holds every array it uses from its start: no array is made, passed into a function
+    or taken out of a tuple per step (each costs numba an atomic reference count; in the
+    pendulum's step those counts took more time than its five generated calls).  The states go
+    to the two slots of ``buffers[3]`` in turn, never to the one holding the current state.
+
+    Parameters
+    ----------
+    q, v : ndarray, shape (n,)
+        The state after step ``k``; not modified.
+    k : int
+        The last step taken.
+    reached : int
+        Number of ``targets`` whose state is kept in ``q_out``, ``v_out`` already.
+    generated : tuple
+        The functions of the generated step (``model[GENERATED_STEP]``).
+    buffers : tuple
+        :func:`_step_buffers`.
+    (the others as :func:`run_samples`)
+
+    Returns
+    -------
+    q, v : ndarray, shape (n,)
+        The state after step ``k`` returned (a slot of ``buffers`` or an array of its own).
+    k, reached : int
+    status : int
+        :data:`RUNNING` (every target reached, or a passage planned before step k + 1),
+        :data:`DECLINED` (step k + 1 declined, nothing of it kept) or the divergence code of
+        step k + 1.
     """
-    if stabilisation == PARTITIONED:
-        return q, v, DECLINED
-    q_new, v_new, accepted = _generated_stages(q, v, t, t_new - t, tableau,
-                                               generated[ACCELERATION], work)
-    if not accepted:
-        return q, v, DECLINED
-    stages = tableau[0].shape[0]
-    jacobians, factorizations, iterations = stages, stages, 0
-    rho = 0.0
-    if stabilisation == PROJECTED:
-        q_new, v_new, rho, iterations, accepted = _generated_projection(
-            q_new, v_new, t_new, projection[0], projection[1], generated, work[3])
-        jacobians += iterations + 1
-        factorizations += iterations + 1
-    elif measure_indicator:
-        accepted = generated[INDICATOR](q_new, v_new, t_new, work[3]) == 1
-        jacobians += 1
-        rho = work[3][0]
-    if not accepted:
-        return q, v, DECLINED
-    counters[RHS_EVALS] += stages
-    counters[JACOBIAN_EVALS] += jacobians
-    counters[FACTORIZATIONS] += factorizations
-    counters[NEWTON_ITERATIONS] += iterations
-    if stabilisation == PROJECTED or measure_indicator:
-        indicators[0], indicators[1] = indicators[1], rho
-    return _checked(q, v, q_new, v_new, limit)
+    c, a, abar, b, bbar = tableau
+    placement, rho_zone, indicators = passage[0], passage[1], passage[2]
+    acceleration, indicator = generated[ACCELERATION], generated[INDICATOR]
+    stages, scratch, slots = buffers[0], buffers[2], buffers[3]
+    q_stage, v_stage = buffers[1][0], buffers[1][1]
+    q_slots, v_slots = (slots[0, 0], slots[1, 0]), (slots[0, 1], slots[1, 1])
+    measure = placement[0] > 0.0
+    count = c.shape[0]
+    address = q.ctypes.data
+    current = 0 if address == q_slots[0].ctypes.data else (
+        1 if address == q_slots[1].ctypes.data else -1)
+    while True:
+        reached = _keep_targets(q, v, k, targets, reached, q_out, v_out)
+        if reached == targets.shape[0]:
+            return q, v, k, reached, RUNNING
+        t = t0 + k * dt
+        if measure and plan_passage(t, dt, t0 + targets[reached] * dt, indicators[1],
+                                    indicators[0], rho_zone, placement)[1] > 0.0:
+            return q, v, k, reached, RUNNING
+        t_new = t0 + (k + 1) * dt
+        h = t_new - t
+        for i in range(count):
+            _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
+            if acceleration(q_stage, v_stage, t + c[i] * h, stages[i]) == 0:
+                return q, v, k, reached, DECLINED
+        slot = 1 if current == 0 else 0
+        q_new, v_new = q_slots[slot], v_slots[slot]
+        _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
+        jacobians, factorizations, iterations = count, count, 0
+        rho = 0.0
+        accepted = True
+        if stabilisation == PROJECTED:
+            q_new, v_new, rho, iterations, accepted = _generated_projection(
+                q_new, v_new, t_new, projection[0], projection[1], generated, scratch)
+            jacobians += iterations + 1
+            factorizations += iterations + 1
+        elif measure:
+            accepted = indicator(q_new, v_new, t_new, scratch) == 1
+            jacobians += 1
+            rho = scratch[0]
+        if not accepted:
+            return q, v, k, reached, DECLINED
+        counters[RHS_EVALS] += count
+        counters[JACOBIAN_EVALS] += jacobians
+        counters[FACTORIZATIONS] += factorizations
+        counters[NEWTON_ITERATIONS] += iterations
+        if stabilisation == PROJECTED or measure:
+            indicators[0], indicators[1] = indicators[1], rho
+        status = _divergence(q_new, v_new, limit)
+        if status != RUNNING:
+            return q, v, k, reached, status
+        # A corrected position is an array of the projection's own, so the slot is free again.
+        current = slot if iterations == 0 else -1
+        q, v, k = q_new, v_new, k + 1
+
+
+@njit(cache=True, inline="always")
+def _keep_targets(q, v, k, targets, reached, q_out, v_out):
+    """Keep (q, q̇), the state after step ``k``, in the rows of ``q_out``, ``v_out`` of every
+    target from ``reached`` on that is at most ``k``; the new count of targets reached."""
+    while reached < targets.shape[0] and targets[reached] <= k:
+        q_out[reached] = q
+        v_out[reached] = v
+        reached += 1
+    return reached
 
 
 @njit(cache=True)
-def _step_buffers(tableau, q, v):
-    """The buffers a run's generated steps write into, made once per run: the stages (s, n), a
-    stage's q and q̇ (n,) each, and the outputs of ρ̂ and the projection's parts (n + 1,)."""
-    return (np.empty((tableau[0].shape[0], v.shape[0])), np.empty(q.shape[0]),
-            np.empty(v.shape[0]), np.empty(q.shape[0] + 1))
+def _step_buffers(tableau, q):
+    """The buffers of a run's generated steps (:func:`_generated_run`), made once per run: the
+    stages (s, n), a stage's q and q̇ (2, n), the outputs of ρ̂ and of the projection's parts
+    (n + 1,), and two slots for a state (q, q̇) (2, 2, n)."""
+    n = q.shape[0]
+    return (np.empty((tableau[0].shape[0], n)), np.empty((2, n)), np.empty(n + 1),
+            np.empty((2, 2, n)))
 
 
 @njit(cache=True, inline="always")
@@ -397,15 +438,25 @@ def _squared_norm(x):
     return total
 
 
-@njit(cache=True)
-def _checked(q, v, q_new, v_new, limit):
-    """(q_new, v_new, RUNNING), or the old state (q, v) and the divergence code when the new one
-    is not finite or its q or q̇ has a 2-norm over ``limit``."""
+@njit(cache=True, inline="always")
+def _divergence(q_new, v_new, limit):
+    """:data:`RUNNING`, or the divergence code of a state (q, q̇) that is not finite or whose q
+    or q̇ has a 2-norm over ``limit``."""
     squared_q, squared_v = _squared_norm(q_new), _squared_norm(v_new)
     if not np.isfinite(squared_q + squared_v):
-        return q, v, DIVERGED_NONFINITE
+        return DIVERGED_NONFINITE
     if max(squared_q, squared_v) > limit * limit:
-        return q, v, DIVERGED_LIMIT
+        return DIVERGED_LIMIT
+    return RUNNING
+
+
+@njit(cache=True)
+def _checked(q, v, q_new, v_new, limit):
+    """(q_new, v_new, RUNNING), or the old state (q, v) and the divergence code of the new one
+    (:func:`_divergence`)."""
+    status = _divergence(q_new, v_new, limit)
+    if status != RUNNING:
+        return q, v, status
     return q_new, v_new, RUNNING
 
 
@@ -464,14 +515,11 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
     cost 0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).
     """
     placement, rho_zone, indicators, passages = passage
-    work = _step_buffers(tableau, q, v)
+    buffers = _step_buffers(tableau, q)
     k = first
     reached = 0
     while True:
-        while reached < targets.shape[0] and targets[reached] <= k:
-            q_out[reached] = q
-            v_out[reached] = v
-            reached += 1
+        reached = _keep_targets(q, v, k, targets, reached, q_out, v_out)
         if reached == targets.shape[0]:
             return q, v, k, RUNNING, reached
         t = t0 + k * dt
@@ -498,18 +546,21 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
                     return q, v, k, status, reached
                 t_start = t_end
             passages[0] += 1
+            q, v, k = q_new, v_new, k_end
         else:
-            k_end = k + 1
-            q_new, v_new, status = _generated_step(
-                q, v, t, t0 + k_end * dt, tableau, model[GENERATED_STEP], stabilisation,
-                projection, limit, indicators, placement[0] > 0.0, counters, work)
-            if status == DECLINED:
+            status = DECLINED
+            if stabilisation != PARTITIONED:  # on to the end, a passage or a declined step
+                q, v, k, reached, status = _generated_run(
+                    q, v, k, targets, reached, t0, dt, tableau, model[GENERATED_STEP],
+                    stabilisation, projection, limit, passage, counters, buffers, q_out, v_out)
+            if status == DECLINED:  # one step on the full path
                 q_new, v_new, status = _step_and_check(
-                    q, v, t, t0 + k_end * dt, tableau, model, stabilisation, projection,
-                    partition, limit, passage, counters)
+                    q, v, t0 + k * dt, t0 + (k + 1) * dt, tableau, model, stabilisation,
+                    projection, partition, limit, passage, counters)
+                if status == RUNNING:
+                    q, v, k = q_new, v_new, k + 1
             if status != RUNNING:
                 return q, v, k, status, reached
-        q, v, k = q_new, v_new, k_end
         check_due[0] = 1
 
 
