@@ -321,10 +321,11 @@ def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabil
     (:func:`plan_passage`), a step one of the functions declines, or a diverged step.
     Partitioning is not run here (its stages need :func:`expand`).
 
-    The loop holds every array it uses from its start: no array is made, passed into a function
-    or taken out of a tuple per step (each costs numba an atomic reference count; in the
-    pendulum's step those counts took more time than its five generated calls).  The states go
-    to the two slots of ``buffers[3]`` in turn, never to the one holding the current state.
+    The loop takes the arrays it uses before its first step: a step makes no array and passes
+    none into a compiled function of its own (each costs numba atomic reference counts; in the
+    pendulum's step those took more time than its five generated calls, docs/speed.md).  The
+    states go to the two slots of ``buffers[3]`` in turn, never to the one holding the current
+    state.
 
     Parameters
     ----------
