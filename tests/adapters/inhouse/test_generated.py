@@ -218,6 +218,41 @@ def test_a_run_whose_guards_hand_calls_back_says_so_with_the_fraction(monkeypatc
         in " ".join(run.notes)
 
 
+def test_a_run_handed_back_now_and_then_is_the_kernels_run_to_the_bit(monkeypatch):
+    """The generated projection declines its first call in every third step (the step's time in
+    the first third of a 3 ms period), after the step's new state was written: the flat generated
+    loop hands those steps to the full path from the old state and takes the kernels' fresh
+    state back.  The states, written into the loop's two slots in turn, must be those of the
+    kernels alone (a loop writing over the state it stepped from fails this)."""
+    made = {}
+
+    def functions(formulation, q0, v0, wanted, compile_new=True):
+        real, notes = original(formulation, q0, v0, wanted, compile_new)
+        residual_size = real[generated.RESIDUAL_SIZE]
+
+        @cfunc(generated.SIGNATURE)
+        def sometimes(q, v, t, out):
+            if (t * 1000.0) % 3.0 < 1.0:
+                return 0
+            return residual_size(q, v, t, out)
+
+        made["sometimes"] = sometimes  # kept alive for the run
+        functions = list(real)
+        functions[generated.RESIDUAL_SIZE] = sometimes
+        return tuple(functions), notes
+
+    original = generated.functions
+    mech = scenario.load("fourbar")
+    times = sample_times(1e-3, 0.2)
+    kernels = get_adapter("inhouse").simulate(mech, "rk4+direct:loop=compiled", 1e-3, 0.2, times)
+    monkeypatch.setattr(generated, "functions", functions)
+    mixed = get_adapter("inhouse").simulate(mech, "rk4+direct:loop=generated", 1e-3, 0.2, times)
+    assert mixed.status == kernels.status == "ok"
+    assert mixed.counters == kernels.counters | {"kernel_calls": mixed.counters["kernel_calls"]}
+    np.testing.assert_array_equal(mixed.position, kernels.position)
+    np.testing.assert_array_equal(mixed.velocity, kernels.velocity)
+
+
 def test_the_hand_back_note_is_absent_when_every_call_was_served():
     assert hand_back_note(0, 8000) is None
     assert "handed back 75879 of 80000 right-hand sides (94.8 %)" in hand_back_note(75879, 80000)
