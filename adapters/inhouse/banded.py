@@ -28,8 +28,7 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from adapters.inhouse.linalg import (CERTIFICATE_MARGIN, gram_condition_bound, min_norm_solve,
-                                     min_norm_solve_and_bound)
+from adapters.inhouse.linalg import gram_condition_bound, min_norm_solve, min_norm_solve_and_bound
 
 #: From this many constraint rows on the banded solves are used: on n_fourbar@N the dense and
 #: banded solves cost about the same near 26 rows, and the banded ones win from there on
@@ -51,6 +50,11 @@ _dpbtrs = _lapack("dpbtrs", 9)   # uplo, n, kd, nrhs, ab, ldab, b, ldb, info
 
 #: Inverse iterations of the smallest-eigenvalue estimate of :func:`banded_spd_solve`.
 INVERSE_ITERATIONS = 8
+#: A banded Cholesky solve is used only when the condition-number estimate is this factor inside
+#: the truncation threshold.  Unlike the dense path's bound
+#: (:data:`~adapters.inhouse.linalg.BOUND_MARGIN`) the estimate can fall short of κ₂ (the
+#: inverse iterations may not have converged), so the factor is wider.
+ESTIMATE_MARGIN = 10.0
 
 
 @dataclass(frozen=True)
@@ -206,7 +210,7 @@ def _banded_factor(matrix, weights, sparsity_arrays):
 @njit(cache=True)
 def banded_spd_solve(matrix, weights, rhs, cut, sparsity_arrays):
     """Solve (A W Aᵀ) x = rhs by banded Cholesky when the estimated 2-norm condition number of
-    S = A W Aᵀ (:func:`_banded_factor`) is below 1/(CERTIFICATE_MARGIN · cut), A (m, n) holding
+    S = A W Aᵀ (:func:`_banded_factor`) is below 1/(ESTIMATE_MARGIN · cut), A (m, n) holding
     the pattern of ``sparsity_arrays`` (:attr:`Sparsity.arrays`), W = diag(weights) (n,) positive.
 
     Returns
@@ -234,7 +238,7 @@ def banded_spd_solve_and_condition(matrix, weights, rhs, cut, sparsity_arrays):
     position, bandwidth = sparsity_arrays[4], sparsity_arrays[5]
     m = matrix.shape[0]
     positive, band, condition = _banded_factor(matrix, weights, sparsity_arrays)
-    if not (positive and CERTIFICATE_MARGIN * cut * condition < 1.0):
+    if not (positive and ESTIMATE_MARGIN * cut * condition < 1.0):
         return False, np.empty(0), positive, condition
     lower, size, kd, lead, one, info = _band_arguments(m, bandwidth)
     permuted = np.empty(m)

@@ -49,8 +49,12 @@ def skippable(x):
 
 #: A Cholesky solve is used only when the condition-number bound of :func:`certified_spd_solve`
 #: is this factor inside the truncation threshold, so that the bound's own round-off cannot
-#: let through a matrix the truncated SVD would have cut.
-CERTIFICATE_MARGIN = 10.0
+#: let through a matrix the truncated SVD would have cut.  The bound is rigorous in exact
+#: arithmetic; its computed value is off by ~k·ε·κ relative (forming S, its Cholesky factor and
+#: L⁻¹), ~2e-5 for k = 20 rows even at κ = 1e10, so a factor 2 is ample.  It was 10: on the double
+#: four-bar (rk4+direct, 1e-2 s) the projections then took the SVD at 154 of 1001 samples, where
+#: 25 truly truncate; at 2, at 65 (docs/measurements.md, "In-house step cost").
+BOUND_MARGIN = 2.0
 
 
 @njit(cache=True)
@@ -181,7 +185,7 @@ def _frobenius(matrix):
 @njit(cache=True)
 def certified_spd_solve(matrix, rhs, cut):
     """Cholesky solve of a symmetric positive-definite matrix @ x = rhs, matrix (k, k), rhs (k,),
-    when its condition number is certified below 1/(CERTIFICATE_MARGIN · cut).
+    when its condition number is certified below 1/(BOUND_MARGIN · cut).
 
     Certificate: κ₂(S) = ‖S‖₂ ‖S⁻¹‖₂ ≤ ‖S‖_F ‖L⁻¹‖₂² with S = LLᵀ, and ‖L⁻¹‖₂² is bounded
     first by :func:`_comparison_bound` (O(k²)) and, only when that bound is too loose, by
@@ -205,8 +209,8 @@ def certified_spd_solve(matrix, rhs, cut):
     if not positive:
         return False, np.empty(0)
     size = _frobenius(matrix)
-    if not (size * _comparison_bound(lower) * CERTIFICATE_MARGIN * cut < 1.0
-            or size * _inverse_frobenius_squared(lower) * CERTIFICATE_MARGIN * cut < 1.0):
+    if not (size * _comparison_bound(lower) * BOUND_MARGIN * cut < 1.0
+            or size * _inverse_frobenius_squared(lower) * BOUND_MARGIN * cut < 1.0):
         return False, np.empty(0)
     return True, _cholesky_solve(lower, rhs)
 
@@ -328,6 +332,6 @@ def min_norm_solve_and_bound(matrix, rhs, cut):
     bound : float
     """
     positive, lower, bound = _certified_factor(weighted_gram(matrix, np.ones(matrix.shape[1])))
-    if positive and bound * CERTIFICATE_MARGIN * (cut * cut) < 1.0:
+    if positive and bound * BOUND_MARGIN * (cut * cut) < 1.0:
         return rmatvec(matrix, _cholesky_solve(lower, rhs)), positive, bound
     return truncated_solve(matrix, rhs, cut), positive, bound
