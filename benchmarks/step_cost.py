@@ -24,7 +24,7 @@ from numba import njit
 from adapters import get_adapter
 from adapters.base import RunGrid
 from adapters.inhouse import kernels
-from adapters.inhouse.compiled import _project
+from adapters.inhouse.compiled import COUNTERS, _project
 from adapters.inhouse.dynamics import forces_kernel, index1_acceleration
 from adapters.inhouse.generated import ACCELERATION, NOTHING
 from harness.model import scenario
@@ -49,7 +49,7 @@ PIECES = ("jacobian", "gamma", "forces", "projection (kernels)", "projection (ge
 def _calls(piece, q, v, rows, constraint_args, dynamics_args, sparsity_arrays, functions, n):
     """``n`` calls of one piece (index into :data:`PIECES`); a sum so none is optimised away."""
     total = 0.0
-    counters = np.zeros(5, dtype=np.int64)
+    counters = np.zeros(COUNTERS, dtype=np.int64)
     out = np.empty(q.shape[0])
     for _ in range(n):
         if piece == 0:

@@ -63,8 +63,14 @@ DECLINED = -1
 PLAIN, PROJECTED, PARTITIONED = range(3)
 
 #: Index of each cost counter in the ``counters`` array of :func:`run_steps` (KERNEL_CALLS:
-#: right-hand sides the generated function left to the kernel, :mod:`.generated`).
-RHS_EVALS, JACOBIAN_EVALS, FACTORIZATIONS, NEWTON_ITERATIONS, KERNEL_CALLS = range(5)
+#: right-hand sides the generated function left to the kernel, :mod:`.generated`; STEP_ENDS:
+#: steps ended by ``direct``'s projection or by ρ̂ for placed passages, STEP_END_KERNELS: those
+#: of them a generated part left to the kernels, near a singular position where the kernels'
+#: solve is the truncated SVD).
+(RHS_EVALS, JACOBIAN_EVALS, FACTORIZATIONS, NEWTON_ITERATIONS, KERNEL_CALLS, STEP_ENDS,
+ STEP_END_KERNELS) = range(7)
+#: Length of the ``counters`` array.
+COUNTERS = 7
 
 
 @njit(cache=True)
@@ -102,10 +108,13 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     n = q.shape[0]
     scratch = np.empty(n + 1)
     previous = np.inf
+    counters[STEP_ENDS] += 1
+    kernel = 0
     for _ in range(proj_max_iter):
         if generated[RESIDUAL_SIZE](q, v, t, scratch) == 1:
             size = scratch[0]
         else:
+            kernel = 1
             size = _max_abs(_kept_rows(kernels.phi(q, t, constraint_args), rows))
         if size < proj_tol or not size < previous:
             break
@@ -117,13 +126,16 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
             counters[JACOBIAN_EVALS] += 1
             q = corrected
         else:
+            kernel = 1
             residual = _kept_rows(kernels.phi(q, t, constraint_args), rows)
             jac = _rows_jacobian(q, t, rows, constraint_args, counters)
             q = q - min_norm_correction(jac, residual, cut, sparsity_arrays)
     counters[FACTORIZATIONS] += 1
     if generated[VELOCITY_CORRECTION](q, v, t, scratch) == 1:
         counters[JACOBIAN_EVALS] += 1
+        counters[STEP_END_KERNELS] += kernel
         return q, scratch[:n].copy(), scratch[n]
+    counters[STEP_END_KERNELS] += 1
     jac = _rows_jacobian(q, t, rows, constraint_args, counters)
     correction, indicator = min_norm_correction_and_indicator(
         jac, pattern_matvec(jac, sparsity_arrays[0], v), cut, sparsity_arrays)
@@ -399,6 +411,7 @@ def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabil
         counters[FACTORIZATIONS] += factorizations
         counters[NEWTON_ITERATIONS] += iterations
         if stabilisation == PROJECTED or measure:
+            counters[STEP_ENDS] += 1
             indicators[0], indicators[1] = indicators[1], rho
         status = _divergence(q_new, v_new, limit)
         if status != RUNNING:
@@ -494,10 +507,12 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
             passage[2][0], passage[2][1] = passage[2][1], rho
         elif stabilisation == PLAIN and passage[0][0] > 0.0:  # ρ̂ needs Φ_q at the step's end
             scratch = np.empty(1)
+            counters[STEP_ENDS] += 1
             if model[GENERATED][INDICATOR](q_new, v_new, t_new, scratch) == 1:
                 counters[JACOBIAN_EVALS] += 1
                 rho = scratch[0]
             else:
+                counters[STEP_END_KERNELS] += 1
                 rho = conditioning_indicator(
                     _rows_jacobian(q_new, t_new, model[ROWS], model[CONSTRAINT_ARGS], counters),
                     model[SPARSITY])

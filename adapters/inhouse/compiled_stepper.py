@@ -100,6 +100,9 @@ class CompiledStepper(FormulationStepper):
         functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
             wanted, compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
         self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
+        #: Whether every function a step's end calls (the projection's parts, ρ̂) was generated.
+        self._step_ends_generated = len(wanted) > 1 and all(
+            functions[which] is not generated.NEVER for which in wanted[1:])
         every_one = all(functions[which] is not generated.NEVER for which in wanted)
         self._model = (np.asarray(formulation.gains, dtype=float),
                        np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
@@ -110,7 +113,7 @@ class CompiledStepper(FormulationStepper):
                              float(formulation.cut)) if self._code == compiled.PROJECTED
                             else (0.0, 0, 0.0))
         self._limit = float(integrator_params["divergence_limit"])
-        self._counters = np.zeros(5, dtype=np.int64)
+        self._counters = np.zeros(compiled.COUNTERS, dtype=np.int64)
         self._check_due = np.zeros(1, dtype=np.int64)
         self._partition = None
         self._restart(*self._start_state)
@@ -277,14 +280,18 @@ class CompiledStepper(FormulationStepper):
 
     # -- reading -------------------------------------------------------------------------------
     def run(self, grid: RunGrid, n_bodies: int):
-        """:meth:`Stepper.run`, with a note of the right-hand sides the generated function handed
-        back to the kernels (:func:`hand_back_note`)."""
+        """:meth:`Stepper.run`, with notes of the right-hand sides and of the step ends
+        (projections, ρ̂) the generated functions handed back to the kernels
+        (:func:`hand_back_note`, :func:`step_end_note`)."""
         trajectory = super().run(grid, n_bodies)
-        if self._accelerations_generated:
-            note = hand_back_note(int(self._counters[compiled.KERNEL_CALLS]),
-                                  int(self._counters[compiled.RHS_EVALS]))
-            if note:
-                trajectory.notes.append(note)
+        counters = self._counters
+        notes = [hand_back_note(int(counters[compiled.KERNEL_CALLS]),
+                                int(counters[compiled.RHS_EVALS]))
+                 if self._accelerations_generated else None,
+                 step_end_note(int(counters[compiled.STEP_END_KERNELS]),
+                               int(counters[compiled.STEP_ENDS]))
+                 if self._step_ends_generated else None]
+        trajectory.notes.extend(note for note in notes if note)
         return trajectory
 
     def _states(self, t: float) -> BodyStates:
@@ -317,6 +324,19 @@ def hand_back_note(kernel_calls: int, rhs_evals: int) -> str | None:
             f"({100.0 * kernel_calls / rhs_evals:.3g} %) to the kernels: a guard of the "
             f"generated right-hand side (a pivot or a certificate bound of its solves) came out "
             f"otherwise than at the traced start")
+
+
+def step_end_note(kernel_ends: int, step_ends: int) -> str | None:
+    """The note of a run whose generated projection or ρ̂ handed ``kernel_ends`` of its
+    ``step_ends`` step ends back to the kernels (None for none): a certificate of their solve
+    failed, as it does near a singular position, where the kernels' solve is the truncated SVD
+    (LAPACK, which cannot be generated), so those steps ran on the kernels' path at its cost."""
+    if kernel_ends == 0:
+        return None
+    return (f"generated functions handed back the projection or ρ̂ of {kernel_ends} of "
+            f"{step_ends} steps ({100.0 * kernel_ends / step_ends:.3g} %) to the kernels: a "
+            f"certificate of their solve failed (near a singular position the kernels solve by "
+            f"the truncated SVD, which cannot be generated)")
 
 
 def _compiled_entry(dispatcher, args: tuple):

@@ -22,7 +22,7 @@ from numba import cfunc, njit
 from adapters import get_adapter
 from adapters.base import RunFailure, RunGrid
 from adapters.inhouse import dynamics, generated, generated_store, tracing
-from adapters.inhouse.compiled_stepper import hand_back_note
+from adapters.inhouse.compiled_stepper import hand_back_note, step_end_note
 from harness.model import scenario
 from harness.neutral.assembly import AssemblyError
 from harness.testing.strategies import aligned_mechanisms, mechanisms
@@ -256,6 +256,41 @@ def test_a_run_handed_back_now_and_then_is_the_kernels_run_to_the_bit(monkeypatc
 def test_the_hand_back_note_is_absent_when_every_call_was_served():
     assert hand_back_note(0, 8000) is None
     assert "handed back 75879 of 80000 right-hand sides (94.8 %)" in hand_back_note(75879, 80000)
+    assert step_end_note(0, 1000) is None
+    assert "the projection or ρ̂ of 72 of 1007 steps (7.15 %)" in step_end_note(72, 1007)
+
+
+def test_a_run_whose_projection_is_handed_back_says_so_with_the_fraction(monkeypatch):
+    """The generated velocity correction declines every call (a stand-in): each of the 100 steps
+    ends on the kernels' projection, the right-hand sides stay generated, and the notes say so."""
+    def functions(formulation, q0, v0, wanted, compile_new=True):
+        real, notes = original(formulation, q0, v0, wanted, compile_new)
+        made = list(real)
+        made[generated.VELOCITY_CORRECTION] = _declines
+        return tuple(made), notes
+
+    original = generated.functions
+    monkeypatch.setattr(generated, "functions", functions)
+    run = get_adapter("inhouse").simulate(scenario.load("fourbar"), "rk4+direct:loop=generated",
+                                          1e-3, 0.1, sample_times(1e-3, 0.1))
+    assert run.status == "ok" and run.counters["kernel_calls"] == 0
+    notes = " ".join(run.notes)
+    assert "handed back the projection or ρ̂ of 100 of 100 steps (100 %) to the kernels" in notes
+    assert "right-hand sides" not in notes
+
+
+def test_a_run_through_a_singular_position_notes_the_projections_the_kernels_served():
+    """The double four-bar's first singular passage (~0.7 s): near it the projection's
+    certificate fails and the kernels' truncated SVD serves those steps.  Measured (2026-11-27,
+    rk4+direct at 1e-2 s, 1 s): 7 of 101 steps; the note must give a count, neither none nor
+    all."""
+    mech = scenario.load("double_fourbar")
+    run = get_adapter("inhouse").simulate(mech, "rk4+direct:loop=generated", 1e-2, 1.0,
+                                          sample_times(1e-2, 1.0))
+    assert run.status == "ok"
+    [note] = [note for note in run.notes if "projection or ρ̂" in note]
+    handed, total = (int(word) for word in note.split(" steps ")[0].split()[-3::2])
+    assert 0 < handed < total
 
 
 def _generated_and_kernel_runs(mech):
