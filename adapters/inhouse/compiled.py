@@ -223,12 +223,15 @@ def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters
     Each stage's q̈ is written in place by the generated right-hand side
     (``model[GENERATED]``), called here rather than through a function that takes the model:
     passing its ~40 arrays cost more than the four-bar's q̈ itself (figures: docs/measurements.md, section "In-house step cost")."""
-    c, a, abar, b, bbar = tableau
-    stages = np.empty((c.shape[0], v.shape[0]))
-    q_stage, v_stage = np.empty(q.shape[0]), np.empty(v.shape[0])
+    c, velocity_table, position_table = tableau
+    count, n = c.shape[0], q.shape[0]
+    state, stage, new = np.empty((1, 2, n)), np.empty((1, 2, n)), np.empty((1, 2, n))
+    _hold(state, 0, q, v)
+    q_stage, v_stage = stage[0, 0], stage[0, 1]
+    stages = np.empty((count, n))
     generated = model[GENERATED][ACCELERATION]
-    for i in range(c.shape[0]):
-        _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
+    for i in range(count):
+        _combine(stage, 0, state, 0, stages, c[i] * h, h * h, position_table, h, velocity_table, i)
         t_stage = t + c[i] * h
         if stabilisation == PARTITIONED:
             stages[i] = _partitioned_acceleration(q_stage, v_stage, t_stage, model, partition,
@@ -237,26 +240,47 @@ def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters
         _count_evaluation(counters)
         if generated(q_stage, v_stage, t_stage, stages[i]) == 0:
             stages[i] = _kernel_acceleration(q_stage, v_stage, t_stage, model, counters)
-    q_new, v_new = np.empty(q.shape[0]), np.empty(v.shape[0])
-    _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
-    return q_new, v_new
+    _combine(new, 0, state, 0, stages, h, h * h, position_table, h, velocity_table, count)
+    return new[0, 0], new[0, 1]
 
 
 @njit(cache=True, inline="always")
-def _combine(q_out, v_out, q, v, stages, velocity_weight, h2, position_weights, h,
-             velocity_weights):
-    """q_out = q + (velocity_weight·v + Σ_j (h2·w̄_j)·k_j), v_out = v + Σ_j (h·w_j)·k_j over
-    the stages k_j with a non-zero weight, summed in order j = 0, 1, … (a stage or update line of
-    the Nyström tableau); all vectors (n,), ``stages`` (s, n), the weights (j,)."""
-    for e in range(v.shape[0]):
-        dq, ve = velocity_weight * v[e], v[e]
-        for j in range(position_weights.shape[0]):
-            if position_weights[j] != 0.0:
-                dq = dq + (h2 * position_weights[j]) * stages[j, e]
-            if velocity_weights[j] != 0.0:
-                ve = ve + (h * velocity_weights[j]) * stages[j, e]
-        q_out[e] = q[e] + dq
-        v_out[e] = ve
+def _combine(out, o, states, s, stages, velocity_weight, h2, position_table, h, velocity_table,
+             row):
+    """Line ``row`` of the Nyström tableau (a stage, or the update for row = s, see
+    :func:`step_tableau`) from the state (q, q̇) = ``states[s]`` into ``out[o]``:
+    q + (velocity_weight·q̇ + Σ_j (h2·Ā⁺_row,j)·k_j) and q̇ + Σ_j (h·A⁺_row,j)·k_j over the
+    stages k_j, j < row, with a non-zero weight, summed in order j = 0, 1, …
+
+    ``out`` and ``states`` (·, 2, n) hold (q, q̇) pairs, ``stages`` (s, n), the tables (s + 1, s).
+    Every entry is indexed in place, no row or slice taken out: in numba each one costs atomic
+    reference counts, which were a third of the pendulum's step (docs/speed.md)."""
+    for e in range(states.shape[2]):
+        dq, ve = velocity_weight * states[s, 1, e], states[s, 1, e]
+        for j in range(row):
+            if position_table[row, j] != 0.0:
+                dq = dq + (h2 * position_table[row, j]) * stages[j, e]
+            if velocity_table[row, j] != 0.0:
+                ve = ve + (h * velocity_table[row, j]) * stages[j, e]
+        out[o, 0, e] = states[s, 0, e] + dq
+        out[o, 1, e] = ve
+
+
+@njit(cache=True, inline="always")
+def _hold(states, s, q, v):
+    """Copy the state (q, q̇), both (n,), into ``states[s]`` ((·, 2, n))."""
+    for e in range(q.shape[0]):
+        states[s, 0, e] = q[e]
+        states[s, 1, e] = v[e]
+
+
+def step_tableau(tableau) -> tuple:
+    """The tableau of a Nyström method as the compiled loop takes it: (c (s,), A⁺ (s + 1, s),
+    Ā⁺ (s + 1, s)), A and Ā with b and b̄ appended as their last rows, so that the update is
+    combined as a stage s + 1 would be (:func:`_combine`, ``row`` = s)."""
+    return (np.ascontiguousarray(tableau.c, dtype=float),
+            np.ascontiguousarray(np.vstack((tableau.a, tableau.b)), dtype=float),
+            np.ascontiguousarray(np.vstack((tableau.abar, tableau.bbar)), dtype=float))
 
 
 @njit(cache=True)
@@ -324,8 +348,8 @@ def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
 
 
 @njit(cache=True)
-def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabilisation,
-                   projection, limit, passage, counters, buffers, q_out, v_out):
+def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisation, projection,
+                   limit, passage, counters, buffers, q_out, v_out):
     """The steps of :func:`_advance` from step ``k`` on the generated functions alone, in one
     flat loop that keeps the state at each target as :func:`_advance` does: the steps of
     :func:`_step_and_check` (the same operations, so the same bits; the counters and ρ̂ updated
@@ -333,17 +357,16 @@ def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabil
     (:func:`plan_passage`), a step one of the functions declines, or a diverged step.
     Partitioning is not run here (its stages need :func:`expand`).
 
-    The loop takes the arrays it uses before its first step: a step makes no array and passes
-    none into a compiled function of its own, except the projection of ``direct``
-    (:func:`_generated_projection`), which is still a call that makes its corrected state.  Each
-    array passed, unpacked or made costs numba atomic reference counts; in the pendulum's step
-    those took more time than its five generated calls (docs/speed.md).  The states go to the
-    two slots of ``buffers[3]`` in turn, never to the one holding the current state.
+    The loop takes the arrays it uses before its first step: a step makes no array, takes no
+    row out of one and passes none into a compiled function of its own, except the projection
+    of ``direct`` (:func:`_generated_projection`), which is still a call that makes its
+    corrected state, and ρ̂.  Each array passed, unpacked, made or cut out costs numba atomic
+    reference counts; in the pendulum's step those took more time than its five generated calls
+    (docs/speed.md).  The state is read and written entry by entry in the two slots of
+    ``buffers[3]``, which it goes to in turn, never to the one holding the current state.
 
     Parameters
     ----------
-    q, v : ndarray, shape (n,)
-        The state after step ``k``; not modified.
     k : int
         The last step taken.
     reached : int
@@ -351,61 +374,62 @@ def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabil
     generated : tuple
         The functions of the generated step (``model[GENERATED_STEP]``).
     buffers : tuple
-        :func:`_step_buffers`.
+        :func:`_step_buffers`; the state after step ``k`` in slot 0 of ``buffers[3]``.
     (the others as :func:`run_samples`)
 
     Returns
     -------
-    q, v : ndarray, shape (n,)
-        The state after step ``k`` returned (a slot of ``buffers`` or an array of its own).
+    slot : int
+        The slot of ``buffers[3]`` that holds the state after step ``k`` returned.
     k, reached : int
     status : int
         :data:`RUNNING` (every target reached, or a passage planned before step k + 1),
         :data:`DECLINED` (step k + 1 declined, nothing of it kept) or the divergence code of
         step k + 1.
     """
-    c, a, abar, b, bbar = tableau
+    c, velocity_table, position_table = tableau
     placement, rho_zone, indicators = passage[0], passage[1], passage[2]
     acceleration, indicator = generated[ACCELERATION], generated[INDICATOR]
-    stages, scratch, slots = buffers[0], buffers[2], buffers[3]
-    q_stage, v_stage = buffers[1][0], buffers[1][1]
-    q_slots, v_slots = (slots[0, 0], slots[1, 0]), (slots[0, 1], slots[1, 1])
+    stages, stage, scratch, states = buffers
+    q_stage, v_stage = stage[0, 0], stage[0, 1]
     measure = placement[0] > 0.0
     count = c.shape[0]
-    address = q.ctypes.data
-    current = 0 if address == q_slots[0].ctypes.data else (
-        1 if address == q_slots[1].ctypes.data else -1)
+    current = 0
     while True:
-        reached = _keep_targets(q, v, k, targets, reached, q_out, v_out)
+        reached = _keep_targets(states, current, k, targets, reached, q_out, v_out)
         if reached == targets.shape[0]:
-            return q, v, k, reached, RUNNING
+            return current, k, reached, RUNNING
         t = t0 + k * dt
         if measure and plan_passage(t, dt, t0 + targets[reached] * dt, indicators[1],
                                     indicators[0], rho_zone, placement)[1] > 0.0:
-            return q, v, k, reached, RUNNING
+            return current, k, reached, RUNNING
         t_new = t0 + (k + 1) * dt
         h = t_new - t
         for i in range(count):
-            _combine(q_stage, v_stage, q, v, stages, c[i] * h, h * h, abar[i, :i], h, a[i, :i])
+            _combine(stage, 0, states, current, stages, c[i] * h, h * h, position_table, h,
+                     velocity_table, i)
             if acceleration(q_stage, v_stage, t + c[i] * h, stages[i]) == 0:
-                return q, v, k, reached, DECLINED
-        slot = 1 if current == 0 else 0
-        q_new, v_new = q_slots[slot], v_slots[slot]
-        _combine(q_new, v_new, q, v, stages, h, h * h, bbar, h, b)
+                return current, k, reached, DECLINED
+        new = 1 - current
+        _combine(states, new, states, current, stages, h, h * h, position_table, h,
+                 velocity_table, count)
         jacobians, factorizations, iterations = count, count, 0
         rho = 0.0
         accepted = True
         if stabilisation == PROJECTED:
             q_new, v_new, rho, iterations, accepted = _generated_projection(
-                q_new, v_new, t_new, projection[0], projection[1], generated, scratch)
+                states[new, 0], states[new, 1], t_new, projection[0], projection[1], generated,
+                scratch)
+            if accepted:
+                _hold(states, new, q_new, v_new)
             jacobians += iterations + 1
             factorizations += iterations + 1
         elif measure:
-            accepted = indicator(q_new, v_new, t_new, scratch) == 1
+            accepted = indicator(states[new, 0], states[new, 1], t_new, scratch) == 1
             jacobians += 1
             rho = scratch[0]
         if not accepted:
-            return q, v, k, reached, DECLINED
+            return current, k, reached, DECLINED
         counters[RHS_EVALS] += count
         counters[JACOBIAN_EVALS] += jacobians
         counters[FACTORIZATIONS] += factorizations
@@ -413,21 +437,21 @@ def _generated_run(q, v, k, targets, reached, t0, dt, tableau, generated, stabil
         if stabilisation == PROJECTED or measure:
             counters[STEP_ENDS] += 1
             indicators[0], indicators[1] = indicators[1], rho
-        status = _divergence(q_new, v_new, limit)
+        status = _divergence(states[new, 0], states[new, 1], limit)
         if status != RUNNING:
-            return q, v, k, reached, status
-        # A corrected position is an array of the projection's own, so the slot is free again.
-        current = slot if iterations == 0 else -1
-        q, v, k = q_new, v_new, k + 1
+            return current, k, reached, status
+        current, k = new, k + 1
 
 
 @njit(cache=True, inline="always")
-def _keep_targets(q, v, k, targets, reached, q_out, v_out):
-    """Keep (q, q̇), the state after step ``k``, in the rows of ``q_out``, ``v_out`` of every
-    target from ``reached`` on that is at most ``k``; the new count of targets reached."""
+def _keep_targets(states, s, k, targets, reached, q_out, v_out):
+    """Keep (q, q̇) = ``states[s]``, the state after step ``k``, in the rows of ``q_out``,
+    ``v_out`` of every target from ``reached`` on that is at most ``k``, entry by entry (a row
+    assignment took 35 ns a step more on the pendulum); the new count of targets reached."""
     while reached < targets.shape[0] and targets[reached] <= k:
-        q_out[reached] = q
-        v_out[reached] = v
+        for e in range(states.shape[2]):
+            q_out[reached, e] = states[s, 0, e]
+            v_out[reached, e] = states[s, 1, e]
         reached += 1
     return reached
 
@@ -435,10 +459,10 @@ def _keep_targets(q, v, k, targets, reached, q_out, v_out):
 @njit(cache=True)
 def _step_buffers(tableau, q):
     """The buffers of a run's generated steps (:func:`_generated_run`), made once per run: the
-    stages (s, n), a stage's q and q̇ (2, n), the outputs of ρ̂ and of the projection's parts
+    stages (s, n), a stage's q and q̇ (1, 2, n), the outputs of ρ̂ and of the projection's parts
     (n + 1,), and two slots for a state (q, q̇) (2, 2, n)."""
     n = q.shape[0]
-    return (np.empty((tableau[0].shape[0], n)), np.empty((2, n)), np.empty(n + 1),
+    return (np.empty((tableau[0].shape[0], n)), np.empty((1, 2, n)), np.empty(n + 1),
             np.empty((2, 2, n)))
 
 
@@ -534,10 +558,12 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
     """
     placement, rho_zone, indicators, passages = passage
     buffers = _step_buffers(tableau, q)
+    states = buffers[3]
     k = first
     reached = 0
     while True:
-        reached = _keep_targets(q, v, k, targets, reached, q_out, v_out)
+        _hold(states, 0, q, v)
+        reached = _keep_targets(states, 0, k, targets, reached, q_out, v_out)
         if reached == targets.shape[0]:
             return q, v, k, RUNNING, reached
         t = t0 + k * dt
@@ -570,9 +596,10 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
             # On to the end, a passage (planned again at the top, with the same inputs) or a
             # declined step.
             if stabilisation != PARTITIONED:
-                q, v, k, reached, status = _generated_run(
-                    q, v, k, targets, reached, t0, dt, tableau, model[GENERATED_STEP],
-                    stabilisation, projection, limit, passage, counters, buffers, q_out, v_out)
+                slot, k, reached, status = _generated_run(
+                    k, targets, reached, t0, dt, tableau, model[GENERATED_STEP], stabilisation,
+                    projection, limit, passage, counters, buffers, q_out, v_out)
+                q, v = states[slot, 0], states[slot, 1]
             if status == DECLINED:  # one step on the full path
                 q_new, v_new, status = _step_and_check(
                     q, v, t0 + k * dt, t0 + (k + 1) * dt, tableau, model, stabilisation,
@@ -597,8 +624,8 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
     t0, dt : float
         Start time and step, s.  Step k ends at t0 + k·dt (no accumulated drift).
     first, last : int
-    tableau : tuple (c (s,), A (s, s), Ā (s, s), b (s,), b̄ (s,))
-        :class:`~adapters.integrators.nystrom.NystromTableau` arrays.
+    tableau : tuple (c (s,), A⁺ (s + 1, s), Ā⁺ (s + 1, s))
+        :func:`step_tableau` of the :class:`~adapters.integrators.nystrom.NystromTableau`.
     model : tuple
         (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
         :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,

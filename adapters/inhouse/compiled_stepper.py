@@ -93,7 +93,7 @@ class CompiledStepper(FormulationStepper):
         formulation = self.formulation
         self._code = COMPILED_FORMULATIONS[formulation_class.name]
         tableau = integrator_class(integrator_name).tableau
-        self._tableau = (tableau.c, tableau.a, tableau.abar, tableau.b, tableau.bbar)
+        self._tableau = compiled.step_tableau(tableau)
         self.passages = Passages.of(formulation, integrator_class(integrator_name))
         calls = grid.steps(grid.t_end) * tableau.c.size
         wanted = self._wanted_functions()
