@@ -309,17 +309,15 @@ def split_check(q_ind, v_ind, t, model, partition, passage, counters):
     return RUNNING
 
 
-@njit(cache=True)
-def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
-    """:func:`_project` by its generated parts alone (same operations, same bits): ``accepted``
-    False as soon as one declines a call.
-
-    ``scratch`` (n + 1,): the run's buffer for the parts' outputs.
+@njit(cache=True, inline="always")
+def _generated_projection(states, s, t, proj_tol, proj_max_iter, generated, scratch):
+    """:func:`_project` of the state (q, q̇) = ``states[s]`` ((·, 2, n)), corrected in place, by
+    its generated parts alone (same operations, same bits): ``accepted`` False as soon as one
+    declines a call (``states[s]`` is then partly corrected).  Each part writes into
+    ``scratch`` (n + 1,), the run's buffer, and the state is copied from it: no array is made.
 
     Returns
     -------
-    q, v : ndarray, shape (n,)
-        The corrected state.
     indicator : float
         ρ̂ of the corrected configuration.
     iterations : int
@@ -327,24 +325,27 @@ def _generated_projection(q, v, t, proj_tol, proj_max_iter, generated, scratch):
         counts them).
     accepted : bool
     """
+    q, v = states[s, 0], states[s, 1]
     n = q.shape[0]
     previous = np.inf
     iterations = 0
     for _ in range(proj_max_iter):
         if generated[RESIDUAL_SIZE](q, v, t, scratch) == 0:
-            return q, v, 0.0, iterations, False
+            return 0.0, iterations, False
         size = scratch[0]
         if size < proj_tol or not size < previous:
             break
         previous = size
         iterations += 1
-        corrected = np.empty(n)
-        if generated[POSITION_CORRECTION](q, v, t, corrected) == 0:
-            return q, v, 0.0, iterations, False
-        q = corrected
+        if generated[POSITION_CORRECTION](q, v, t, scratch) == 0:
+            return 0.0, iterations, False
+        for e in range(n):
+            q[e] = scratch[e]
     if generated[VELOCITY_CORRECTION](q, v, t, scratch) == 0:
-        return q, v, 0.0, iterations, False
-    return q, scratch[:n].copy(), scratch[n], iterations, True
+        return 0.0, iterations, False
+    for e in range(n):
+        v[e] = scratch[e]
+    return scratch[n], iterations, True
 
 
 @njit(cache=True)
@@ -359,8 +360,8 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
 
     The loop takes the arrays it uses before its first step: a step makes no array, takes no
     row out of one and passes none into a compiled function of its own, except the projection
-    of ``direct`` (:func:`_generated_projection`), which is still a call that makes its
-    corrected state, and ρ̂.  Each array passed, unpacked, made or cut out costs numba atomic
+    of ``direct`` (:func:`_generated_projection`) and ρ̂, which take the new state's rows.  Each
+    array passed, unpacked, made or cut out costs numba atomic
     reference counts; in the pendulum's step those took more time than its five generated calls
     (docs/speed.md).  The state is read and written entry by entry in the two slots of
     ``buffers[3]``, which it goes to in turn, never to the one holding the current state.
@@ -417,11 +418,8 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
         rho = 0.0
         accepted = True
         if stabilisation == PROJECTED:
-            q_new, v_new, rho, iterations, accepted = _generated_projection(
-                states[new, 0], states[new, 1], t_new, projection[0], projection[1], generated,
-                scratch)
-            if accepted:
-                _hold(states, new, q_new, v_new)
+            rho, iterations, accepted = _generated_projection(
+                states, new, t_new, projection[0], projection[1], generated, scratch)
             jacobians += iterations + 1
             factorizations += iterations + 1
         elif measure:
