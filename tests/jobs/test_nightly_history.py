@@ -3,7 +3,8 @@ five times, with changes injected from the third run on; then ``mbh history`` ov
 
 The changes are injected by replacing the nightly's work function (pytest ``monkeypatch``, as in
 tests/jobs/test_nightly.py).  Every wall time, the calibration case's included, is set by the
-injected work (0.01 s, one case ×20 when slowed), so the calibrated times are exactly 1 or 20 and
+injected work (0.01 s, one case ×20 when slowed; the calibration case's figure replaced too, as it
+runs in the campaign's process or in a worker), so the calibrated times are exactly 1 or 20 and
 the test does not depend on the machine's timing noise (the noise is the synthetic tests' job:
 tests/report/test_history.py).  Expected, by the rules of harness/report/changepoints.py:
 
@@ -23,7 +24,10 @@ from dataclasses import dataclass
 import pytest
 
 from harness import cli
+from harness.common.machine_speed import workload_name
 from harness.jobs import nightly
+from harness.run import campaign as campaign_run
+from harness.run.calibration import CALIBRATION, WithCalibration
 from harness.run.row import CaseWork
 from harness.store.runs import list_runs
 from tests.helpers import run_mbh
@@ -70,8 +74,27 @@ class ControlledWork(CaseWork):
         return row, trajectory
 
 
+def _fixed_calibration(spec) -> tuple[dict, None]:
+    """The calibration case's row with the figure WALL_TIME.  Timed for real, the machine-speed
+    workload varies from run to run (0.15–0.22 s on a busy 2-core machine), and one CI run saw a
+    third case "changed since the last good run" from that alone."""
+    return ({"case_id": spec.case_id, "status": "ok", "reason": "", "wall_time_s": WALL_TIME,
+             "workload": workload_name()}, None)
+
+
+@dataclass(frozen=True)
+class FixedCalibration(WithCalibration):
+    """:class:`WithCalibration` with :func:`_fixed_calibration` for the calibration case (the
+    workers run it when the warm template is up already)."""
+
+    def __call__(self, spec):
+        return _fixed_calibration(spec) if spec == CALIBRATION else self.work(spec)
+
+
 def _night(campaign, root, monkeypatch, capsys, injected: bool, *extra) -> tuple[int, str]:
     factors = {"error_factor": 1e3, "time_factor": 20.0} if injected else {}
+    monkeypatch.setattr(campaign_run, "calibration_work", _fixed_calibration)
+    monkeypatch.setattr(campaign_run, "WithCalibration", FixedCalibration)
     monkeypatch.setattr(nightly, "case_work", lambda c: ControlledWork(c.bounds, c.accuracy,
                                                                        **factors))
     code = cli.main(["nightly", "--campaign", str(campaign), "--root", str(root), "--quiet",
@@ -93,6 +116,7 @@ def test_history_gate_fails_each_new_regression_once(tmp_path, monkeypatch, caps
     for _ in range(2):
         code, out = _night(campaign, root, monkeypatch, capsys, False, "--no-report")
         assert code == 0 and "**No new regression.**" in out, out
+        assert f"calibration case {WALL_TIME:.3g} s." in out  # not the machine's timing
 
     code, out = _night(campaign, root, monkeypatch, capsys, True, "--no-report")
     assert code == 1, out
