@@ -109,12 +109,12 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
     scratch = np.empty(n + 1)
     previous = np.inf
     counters[STEP_ENDS] += 1
-    kernel = 0
+    handed_back = 0
     for _ in range(proj_max_iter):
         if generated[RESIDUAL_SIZE](q, v, t, scratch) == 1:
             size = scratch[0]
         else:
-            kernel = 1
+            handed_back = 1
             size = _max_abs(_kept_rows(kernels.phi(q, t, constraint_args), rows))
         if size < proj_tol or not size < previous:
             break
@@ -126,14 +126,14 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
             counters[JACOBIAN_EVALS] += 1
             q = corrected
         else:
-            kernel = 1
+            handed_back = 1
             residual = _kept_rows(kernels.phi(q, t, constraint_args), rows)
             jac = _rows_jacobian(q, t, rows, constraint_args, counters)
             q = q - min_norm_correction(jac, residual, cut, sparsity_arrays)
     counters[FACTORIZATIONS] += 1
     if generated[VELOCITY_CORRECTION](q, v, t, scratch) == 1:
         counters[JACOBIAN_EVALS] += 1
-        counters[STEP_END_KERNELS] += kernel
+        counters[STEP_END_KERNELS] += handed_back
         return q, scratch[:n].copy(), scratch[n]
     counters[STEP_END_KERNELS] += 1
     jac = _rows_jacobian(q, t, rows, constraint_args, counters)
@@ -361,9 +361,8 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
     The loop takes the arrays it uses before its first step: a step makes no array, takes no
     row out of one and passes none into a compiled function of its own, except the projection
     of ``direct`` (:func:`_generated_projection`) and ρ̂, which take the new state's rows.  Each
-    array passed, unpacked, made or cut out costs numba atomic
-    reference counts; in the pendulum's step those took more time than its five generated calls
-    (docs/speed.md).  The state is read and written entry by entry in the two slots of
+    array passed, unpacked, made or cut out costs numba atomic reference counts; in the
+    pendulum's step those took more time than its five generated calls (docs/speed.md).  The state is read and written entry by entry in the two slots of
     ``buffers[3]``, which it goes to in turn, never to the one holding the current state.
 
     Parameters

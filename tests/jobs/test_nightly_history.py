@@ -76,8 +76,8 @@ class ControlledWork(CaseWork):
 
 def _fixed_calibration(spec) -> tuple[dict, None]:
     """The calibration case's row with the figure WALL_TIME.  Timed for real, the machine-speed
-    workload varies from run to run (0.15–0.22 s on a busy 2-core machine), and one CI run saw a
-    third case "changed since the last good run" from that alone."""
+    workload varies from run to run (0.15–0.22 s on a busy 2-core machine), and a fresh-clone run
+    of the slow suite saw a third case "changed since the last good run" from that alone."""
     return ({"case_id": spec.case_id, "status": "ok", "reason": "", "wall_time_s": WALL_TIME,
              "workload": workload_name()}, None)
 
