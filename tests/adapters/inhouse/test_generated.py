@@ -11,6 +11,7 @@ is far below any method's error.
 
 from __future__ import annotations
 
+import math
 import types
 
 import numpy as np
@@ -51,6 +52,26 @@ def test_exact_identities_fold_and_repeated_operations_are_recorded_once():
     negated = 0.0 - x
     assert negated.value == -2.0 and graph.nodes[negated.index][0] == "neg"
     assert len(graph.nodes) == 4  # x, y, x·y, −x
+
+
+def test_zero_over_a_symbol_folds_to_the_kernels_signed_zero_while_the_sign_holds():
+    graph = tracing.Graph()
+    x, y = graph.inputs("q", [2.0, -3.0])
+    over_x, over_y, negative_over_x = 0.0 / x, 0.0 / y, -0.0 / x
+    assert [math.copysign(1.0, z) for z in (over_x, over_y, negative_over_x)] == [1.0, -1.0, -1.0]
+    assert not isinstance(0.0 / x, tracing.Symbol) and len(graph.nodes) == 2
+    assert [(node, compare, outcome) for node, compare, _, outcome in graph.guards] == \
+        [(x.index, "gt", True), (y.index, "lt", True)]  # each once, though 0/x was traced twice
+    namespace = {}
+    exec("import numpy as np\n"
+         + tracing.function_source(graph, "f", ("q",), [over_x, over_y, x + y]), namespace)
+    out = np.zeros(3)
+    for q, accepted in (([5.0, -1.0], 1), ([-5.0, -1.0], 0), ([0.0, -1.0], 0),
+                        ([np.nan, -1.0], 0), ([5.0, 1.0], 0)):
+        assert namespace["f"](np.array(q), out) == accepted
+        if accepted:  # the kernel's own 0/x, bit for bit (its sign too)
+            assert out[0] == 0.0 / q[0] and math.copysign(1.0, out[0]) == 1.0
+            assert math.copysign(1.0, out[1]) == math.copysign(1.0, 0.0 / q[1])
 
 
 def test_a_guard_hands_the_call_back_when_the_branch_goes_the_other_way():
