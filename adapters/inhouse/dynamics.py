@@ -128,7 +128,7 @@ def _euler_block_inverse(theta, g, inertia_inverse, scales):
     and B⁻¹ = Eᵀ D diag(J̄⁻¹, 1/c) D E = w² Ḡᵀ J̄⁻¹ Ḡ + a θθᵀ (w = 1/(4|θ|²), a = 1/(c|θ|⁴)):
     no factorisation, and made once per body (10 entries, ~150 operations) it costs each row of
     Φ_q the body touches one 4 × 4 product (28 operations) instead of the three products with
-    Ḡ, J̄⁻¹ and Ḡᵀ (78; the spatial four-bar's traced q̈ 8,113 → 7,417 operations).
+    Ḡ, J̄⁻¹ and Ḡᵀ (78; the spatial four-bar's traced q̈ 8,113 → 7,264 operations).
     """
     rotational, along_scale = scales
     square = rotational * rotational

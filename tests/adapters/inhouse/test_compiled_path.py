@@ -279,9 +279,10 @@ def test_banded_solves_match_the_dense_ones_on_the_n_fourbar(n_cells):
 def test_the_euler_parameter_block_solve_matches_the_dense_one(name):
     """The block-diagonal solve of Euler-parameter bodies (only the rows touching each body,
     S = Φ_q M'⁻¹ Φ_qᵀ from the rows' patterns) against the dense M̃ form, at the start with a
-    random velocity in Φ_q's null space.  Measured differences (2026-11-25): 4.3e-14 on
-    accelerations up to 7.2 (fourbar_spatial), 4.4e-14 on 12.4 (slider_crank); bound 1e-11 as
-    for the banded solves above."""
+    random velocity in Φ_q's null space.  Measured differences: 4.3e-14 on accelerations up to
+    7.2 (fourbar_spatial), 4.4e-14 on 12.4 (slider_crank) (2026-11-25); 1.8e-14 and 2.3e-14 with
+    each body's rotational block inverse made once (2026-11-27); bound 1e-11 as for the banded
+    solves above."""
     from adapters.inhouse.dynamics import (ACCELERATION_CUT, mass_and_forces_kernel,
                                            range_space_acceleration, spatial_block_acceleration)
     from adapters.inhouse.kinematics import common_start
