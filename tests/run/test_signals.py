@@ -140,16 +140,37 @@ def case_workers(run: subprocess.Popen) -> list[psutil.Process]:
 
 def kill_a_worker(run: subprocess.Popen, draw: random.Random) -> bool:
     """SIGKILL one running case process of ``run`` as soon as there is one; False if the run
-    ended first."""
+    ended first.  The process is stopped first and killed only once it shows stopped: one that
+    had begun to exit between :func:`case_workers` and the kill ignored the signal, ended with 0
+    and left no ``crashed`` row (a CI run's slow suite drew such a process at the moment 0.94,
+    when the last cases end)."""
     while run.poll() is None:
         workers = case_workers(run)
         if workers:
+            worker = draw.choice(workers)
             try:
-                draw.choice(workers).send_signal(signal.SIGKILL)
-                return True
+                worker.send_signal(signal.SIGSTOP)
+                if stopped(worker):
+                    worker.send_signal(signal.SIGKILL)
+                    return True
+                worker.send_signal(signal.SIGCONT)  # not stopped: exiting, or never to be
             except psutil.NoSuchProcess:
                 pass
         time.sleep(0.005)
+    return False
+
+
+def stopped(process: psutil.Process) -> bool:
+    """Whether ``process``, sent SIGSTOP, shows stopped within :data:`DEATH_WAIT_S` (False as
+    soon as it shows ended: it was exiting, and a stop or a kill no longer reaches it)."""
+    deadline = time.monotonic() + DEATH_WAIT_S
+    while time.monotonic() < deadline:
+        status = process.status()
+        if status == psutil.STATUS_STOPPED:
+            return True
+        if status in (psutil.STATUS_ZOMBIE, psutil.STATUS_DEAD):
+            return False
+        time.sleep(0.001)
     return False
 
 
