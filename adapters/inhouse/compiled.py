@@ -362,8 +362,9 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
     row out of one and passes none into a compiled function of its own, except the projection
     of ``direct`` (:func:`_generated_projection`) and ρ̂, which take the new state's rows.  Each
     array passed, unpacked, made or cut out costs numba atomic reference counts; in the
-    pendulum's step those took more time than its five generated calls (docs/speed.md).  The state is read and written entry by entry in the two slots of
-    ``buffers[3]``, which it goes to in turn, never to the one holding the current state.
+    pendulum's step those took more time than its five generated calls (docs/speed.md).  The
+    state is read and written entry by entry in the two slots of ``buffers[3]``, which it goes
+    to in turn, never to the one holding the current state.
 
     Parameters
     ----------

@@ -160,8 +160,8 @@ def _binary(op: str, a, b):
         if not b_symbol and b == 1.0:
             return a
         if not a_symbol and a == 0.0 and _value(b) != 0.0 and not math.isnan(_value(b)):
-            # 0 / x: the kernel's ±0 wherever x keeps its traced sign (a guard); a factor or
-            # divisor that is a structural zero of the kernel's matrices stays a constant
+            # 0 / x: the kernel's ±0 wherever x keeps its traced sign (a guard), so an entry
+            # below a structural zero of a factorised matrix stays a constant (module notes)
             positive = _value(b) > 0.0
             b.graph.guard(b.index, "gt" if positive else "lt", 0.0, True)
             return a if positive else -a
