@@ -5,10 +5,12 @@ Method names are ``INTEGRATOR+STABILISATION[:key=value,...]`` (e.g. ``rk4+baumga
 the aliases ``default`` and ``best``.  Parameters go to whichever part declares them; the
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
 Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
-one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition`` run compiled from sample
-to sample, with functions generated for the mechanism (``loop=auto``, the default, or
-``generated``; :mod:`adapters.inhouse.compiled_stepper`), with the generic kernels
-(``loop=compiled``) or stepped from Python (``loop=python``); all compute the same numbers.
+one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition``, and linear multistep
+methods with ``none``, ``baumgarte`` or ``direct``, run compiled, with functions generated for
+the mechanism (``loop=auto``, the default, or ``generated``;
+:mod:`adapters.inhouse.compiled_stepper`), with the generic kernels (``loop=compiled``) or
+stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
+methods to their Newton tolerance: :mod:`adapters.inhouse.compiled_multistep`).
 """
 
 from __future__ import annotations

@@ -3,8 +3,10 @@ for partitioning each stretch between two sample times, in a single compiled cal
 runs per step.
 
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
-rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations unless the method
-says ``loop=python``; every other method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
+rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations, and for the
+linear multistep methods (ab1–ab5, am1–am5, bdf1–bdf4: :mod:`adapters.inhouse.compiled_multistep`)
+with ``none``, ``baumgarte`` and ``direct``, unless the method says ``loop=python``; every other
+method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
 With ``loop=auto`` (the default) or ``generated`` each stage's q̈, the projection's parts and ρ̂
 come from functions generated for the formulation (:mod:`adapters.inhouse.generated`: the same
 numbers, a step 3–4 times faster; :data:`LOOPS` says when ``auto`` compiles them), with
@@ -33,13 +35,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import compiled, generated
+from adapters.inhouse import compiled, compiled_multistep, generated
 from adapters.inhouse.driver import FormulationStepper
 from adapters.inhouse.fold import Passages
 from adapters.inhouse.partition import CoordinatePartitioning
 from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
 from adapters.inhouse.states import body_states
 from adapters.integrators import integrator_class
+from adapters.integrators.multistep import LinearMultistep
 from adapters.integrators.nystrom import NystromIntegrator
 from harness.model.mechanism import Mechanism
 from harness.model.trajectory import BodyStates
@@ -63,14 +66,25 @@ LOOPS = ("auto", "generated", "compiled", "python")
 AUTO_MIN_CALLS = 1000
 
 
+#: Formulations of the linear multistep methods' compiled path (:mod:`.compiled_multistep`):
+#: not partitioning, whose restarts at a new split restart the history.
+MULTISTEP_FORMULATIONS = (NoStabilisation.name, Baumgarte.name, DirectCorrection.name)
+
+
 def has_compiled_path(integrator_name: str, formulation_name: str) -> bool:
-    """True when ``integrator+formulation`` can run on the compiled path."""
+    """True when ``integrator+formulation`` can run on the compiled path: an explicit one-step
+    method with a formulation of :data:`COMPILED_FORMULATIONS`, or a linear multistep method
+    with one of :data:`MULTISTEP_FORMULATIONS`."""
+    method_class = integrator_class(integrator_name)
+    if issubclass(method_class, LinearMultistep):
+        return formulation_name in MULTISTEP_FORMULATIONS
     return (formulation_name in COMPILED_FORMULATIONS
-            and issubclass(integrator_class(integrator_name), NystromIntegrator))
+            and issubclass(method_class, NystromIntegrator))
 
 
 class CompiledStepper(FormulationStepper):
-    """One fixed-step run of ``formulation_class`` by the Nyström tableau of ``integrator_name``.
+    """One fixed-step run of ``formulation_class`` by the Nyström tableau or the linear
+    multistep method of ``integrator_name`` (:func:`has_compiled_path`).
 
     Parameters
     ----------
@@ -78,9 +92,11 @@ class CompiledStepper(FormulationStepper):
     formulation_class : type
         One of :data:`COMPILED_FORMULATIONS`' classes.
     integrator_name : str
-        A :class:`~adapters.integrators.nystrom.NystromIntegrator` method.
+        A :class:`~adapters.integrators.nystrom.NystromIntegrator` or
+        :class:`~adapters.integrators.multistep.LinearMultistep` method.
     integrator_params, formulation_params : dict
-        Resolved parameters of each part (``divergence_limit`` is the integrator's).
+        Resolved parameters of each part (``divergence_limit``, ``tol`` and ``max_iter`` are the
+        integrator's).
     grid : RunGrid
     loop : str
         ``auto``, ``generated`` or ``compiled`` (:data:`LOOPS`).
@@ -92,10 +108,22 @@ class CompiledStepper(FormulationStepper):
         super().__init__(mech, formulation_class, formulation_params, grid)
         formulation = self.formulation
         self._code = COMPILED_FORMULATIONS[formulation_class.name]
-        tableau = integrator_class(integrator_name).tableau
-        self._tableau = compiled.step_tableau(tableau)
-        self.passages = Passages.of(formulation, integrator_class(integrator_name))
-        calls = grid.steps(grid.t_end) * tableau.c.size
+        method_class = integrator_class(integrator_name)
+        self._multistep = issubclass(method_class, LinearMultistep)
+        if self._multistep:
+            #: The method's arguments of the compiled loop (a Nyström tableau, or a multistep
+            #: method with its history and Newton state).
+            self._method = compiled_multistep.method_arguments(
+                method_class, integrator_params, self._start_state[0].size)
+            self._newton = (integrator_params.get("tol"), integrator_params.get("max_iter"))
+            # At least one right-hand side a step, two for an implicit method (its iteration
+            # evaluates once at least).
+            calls_per_step = 1 if method_class.beta[0] == 0.0 else 2
+        else:
+            self._method = compiled.step_tableau(method_class.tableau)
+            calls_per_step = method_class.tableau.c.size
+        self.passages = Passages.of(formulation, method_class)
+        calls = grid.steps(grid.t_end) * calls_per_step
         wanted = self._wanted_functions()
         functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
             wanted, compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
@@ -137,7 +165,8 @@ class CompiledStepper(FormulationStepper):
         if self._code == compiled.PARTITIONED:
             dispatcher, args = compiled.run_steps, self._steps_args(0)
         else:
-            dispatcher, args = compiled.run_samples, self._samples_args(np.zeros(0, np.int64))
+            dispatcher = (compiled_multistep if self._multistep else compiled).run_samples
+            args = self._samples_args(np.zeros(0, np.int64))
         dispatcher(*args)
         self._entry = _compiled_entry(dispatcher, args)
 
@@ -195,7 +224,7 @@ class CompiledStepper(FormulationStepper):
     # -- stepping ------------------------------------------------------------------------------
     def _steps_args(self, last: int) -> tuple:
         """Arguments of :func:`compiled.run_steps` from the integrated state to step ``last``."""
-        return (self.q, self.v, 0.0, self.grid.dt, self.steps, last, self._tableau, self._model,
+        return (self.q, self.v, 0.0, self.grid.dt, self.steps, last, self._method, self._model,
                 self._code, self._projection, self._partition, self._check_due, self._limit,
                 self.passages.arrays, self._counters)
 
@@ -247,7 +276,7 @@ class CompiledStepper(FormulationStepper):
         if targets.size and targets[0] < first:
             raise ValueError(f"step {targets[0]} was passed without its state being kept "
                              f"(the run is at step {first})")
-        return (q, v, 0.0, self.grid.dt, first, targets, self._tableau, self._model, self._code,
+        return (q, v, 0.0, self.grid.dt, first, targets, self._method, self._model, self._code,
                 self._projection, self._partition, self._check_due, self._limit,
                 self.passages.arrays, self._counters, np.empty((targets.size, q.size)),
                 np.empty((targets.size, v.size)))
@@ -285,6 +314,10 @@ class CompiledStepper(FormulationStepper):
             return "diverged", f"state norm exceeds divergence_limit={self._limit:g}"
         if status == compiled.DIVERGED_NONFINITE:
             return "diverged", "non-finite state"
+        if status == compiled.FAILED_NEWTON and self._multistep:
+            tol, max_iter = self._newton
+            return "failed", (f"StepFailure: Newton iteration did not converge in {max_iter} "
+                              f"iterations to tol={tol:g} at t={(self.steps + 1) * self.grid.dt:.6g}")
         if status == compiled.FAILED_NEWTON:
             return "failed", (f"StepFailure: dependent coordinates did not converge (max |Φ| = "
                               f"{failure[1]:.3g}) at t = {failure[2]:g}")

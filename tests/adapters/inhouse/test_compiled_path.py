@@ -106,7 +106,7 @@ def test_a_whole_run_in_one_call_hands_out_each_sample_and_refuses_to_go_back():
         whole._step_to(t)
         stepwise.q, stepwise.v, stepwise.steps, _ = compiled.run_steps(
             stepwise.q, stepwise.v, 0.0, grid.dt, stepwise.steps, grid.steps(t),
-            stepwise._tableau, stepwise._model, stepwise._code, stepwise._projection,
+            stepwise._method, stepwise._model, stepwise._code, stepwise._projection,
             stepwise._partition, stepwise._check_due, stepwise._limit, stepwise.passages.arrays,
             stepwise._counters)
         assert whole.steps == stepwise.steps

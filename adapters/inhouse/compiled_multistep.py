@@ -1,0 +1,310 @@
+"""The compiled stepping path of the linear multistep methods (Adams–Bashforth, Adams–Moulton,
+Gear/BDF: :class:`~adapters.integrators.multistep.LinearMultistep`) with the ``none``,
+``baumgarte`` and ``direct`` formulations: a whole run in one numba call, as
+:mod:`adapters.inhouse.compiled` runs the explicit one-step methods.
+
+The step is :class:`~adapters.integrators.multistep.LinearMultistep`'s on y = (q, q̇),
+f = (q̇, q̈) (Rouvinen 2003, eq. 94), in the same order: f at the step's start goes into the
+history; until the history holds the points the method reads, a classical RK4 step
+(:func:`adapters.inhouse.compiled._nystrom_step`, eqs. 102–106); then ψ of eq. 107 and, for an
+implicit method (β₀ ≠ 0), Newton's iteration on y − hβ₀ f(t_{n+1}, y) − ψ = 0 from the explicit
+Euler predictor, as :class:`~adapters.integrators.newton.NewtonSolver` iterates it: the
+iteration matrix I − hβ₀ J with J by forward differences at the last accepted state, kept
+across iterations and steps, refreshed when an iteration converges slowly, the convergence test
+on the scaled correction.  ``direct`` then projects the new state (eqs. 127, 137).  Each q̈ comes
+from the generated right-hand side where it serves, else from the kernels (``kernel_calls``).
+
+The numbers agree with the Python path's to the Newton tolerance, not to the bit: the LU
+factorisation is written out here (partial pivoting, LAPACK's choice of pivots, its own order
+of summation), and the Jacobian's differences amplify the round-off by which the generated q̈
+differs from the kernels' by 1/√ε.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from adapters.inhouse.compiled import (CONSTRAINT_ARGS, FACTORIZATIONS, FAILED_LINALG,
+                                       FAILED_NEWTON, GENERATED, JACOBIAN_EVALS,
+                                       NEWTON_ITERATIONS, PLAIN, PROJECTED, RHS_EVALS, ROWS,
+                                       RUNNING, SPARSITY, _checked, _count_evaluation, _hold,
+                                       _keep_targets, _kernel_acceleration, _nystrom_step,
+                                       _project, step_tableau)
+from adapters.inhouse.generated import ACCELERATION
+from adapters.integrators.multistep import LinearMultistep, points_read
+from adapters.integrators.newton import SLOW_RATE
+from adapters.integrators.nystrom import RK4
+
+#: Slots of the Newton state array (``newton`` of :func:`method_arguments`): whether J is held,
+#: and hβ₀ of the factorised iteration matrix (NaN: none factorised).
+HAS_JACOBIAN, FACTORED_GAMMA = range(2)
+
+
+def method_arguments(method_class: type[LinearMultistep], params: dict, n: int) -> tuple:
+    """The method as :func:`run_samples` takes it, with the run's own history and Newton state.
+
+    Parameters
+    ----------
+    method_class : type[LinearMultistep]
+    params : dict
+        Its resolved parameters (``tol``, ``max_iter`` of an implicit method).
+    n : int
+        Number of coordinates.
+
+    Returns
+    -------
+    tuple
+        (α (p + 1,), β (k + 1,), (tol, max_iter, the slow rate of
+        :data:`~adapters.integrators.newton.SLOW_RATE`: a module the kernels' fingerprint does
+        not cover, so it comes as an argument), the RK4 start tableau of
+        :func:`~adapters.inhouse.compiled.step_tableau`, history (points, 2, 2n): (y, f) of the
+        last steps' starts, newest first, held (1,) int64: points in it, J (2n, 2n), the LU
+        factors of I − hβ₀J (2n, 2n), their row pivots (2n,) int64, Newton state (2,)); the
+        arrays after the first four are updated in place.
+    """
+    alpha = np.ascontiguousarray(method_class.alpha, dtype=float)
+    beta = np.ascontiguousarray(method_class.beta, dtype=float)
+    newton = (float(params.get("tol", 1.0)), int(params.get("max_iter", 1)), SLOW_RATE)
+    size = 2 * n
+    state = np.zeros(2)
+    state[FACTORED_GAMMA] = np.nan
+    return (alpha, beta, newton, step_tableau(RK4.tableau),
+            np.zeros((points_read(alpha, beta), 2, size)), np.zeros(1, dtype=np.int64),
+            np.zeros((size, size)), np.zeros((size, size)), np.zeros(size, dtype=np.int64),
+            state)
+
+
+@njit(cache=True)
+def lu_factor_into(lu, pivots):
+    """LU factorisation with partial pivoting of the square matrix in ``lu`` (m, m), in place:
+    unit lower factor below the diagonal, upper factor on and above it; ``pivots`` (m,) int64
+    receives the row swapped with row i at step i (LAPACK getrf's convention, its choice of the
+    largest |entry| in the column).  False when a pivot is zero (the factors are then unusable)."""
+    m = lu.shape[0]
+    for i in range(m):
+        pivot = i
+        for r in range(i + 1, m):
+            if abs(lu[r, i]) > abs(lu[pivot, i]):
+                pivot = r
+        pivots[i] = pivot
+        if pivot != i:
+            for c in range(m):
+                lu[i, c], lu[pivot, c] = lu[pivot, c], lu[i, c]
+        if lu[i, i] == 0.0:
+            return False
+        for r in range(i + 1, m):
+            factor = lu[r, i] / lu[i, i]
+            lu[r, i] = factor
+            if factor != 0.0:
+                for c in range(i + 1, m):
+                    lu[r, c] -= factor * lu[i, c]
+    return True
+
+
+@njit(cache=True)
+def lu_solve_into(lu, pivots, x):
+    """Solve A x = b in place (``x`` (m,) holds b on entry) from :func:`lu_factor_into`'s
+    factors of A."""
+    m = lu.shape[0]
+    for i in range(m):
+        p = pivots[i]
+        if p != i:
+            x[i], x[p] = x[p], x[i]
+    for i in range(m):
+        total = x[i]
+        for c in range(i):
+            total -= lu[i, c] * x[c]
+        x[i] = total
+    for i in range(m - 1, -1, -1):
+        total = x[i]
+        for c in range(i + 1, m):
+            total -= lu[i, c] * x[c]
+        x[i] = total / lu[i, i]
+
+
+@njit(cache=True, inline="always")
+def _acceleration_into(q, v, t, model, counters, out):
+    """q̈ (n,) into ``out``: the generated right-hand side where it serves, else the kernels'
+    (counted in ``kernel_calls``); the evaluation itself is not counted here."""
+    if model[GENERATED][ACCELERATION](q, v, t, out) == 0:
+        out[:] = _kernel_acceleration(q, v, t, model, counters)
+
+
+@njit(cache=True)
+def _refresh_jacobian(jacobian, t, y, a, model, counters):
+    """J = ∂f/∂y = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]] (2n, 2n) at (t, y) into ``jacobian``, by the
+    forward differences of :func:`adapters.integrators.newton.first_order_jacobian` (step
+    √ε·max(1, |y_j|)); ``a`` is q̈ there.  Counted as the Python path counts it: 2n right-hand
+    sides, 2n + 1 Jacobians (the formulation's and the integrator's), 2n factorisations."""
+    size = y.shape[0]
+    n = size // 2
+    root_eps = np.sqrt(np.finfo(np.float64).eps)
+    jacobian[:, :] = 0.0
+    for i in range(n):
+        jacobian[i, n + i] = 1.0
+    shifted = y.copy()
+    column = np.empty(n)
+    for j in range(size):
+        shifted[j] = y[j] + root_eps * max(1.0, abs(y[j]))
+        step = shifted[j] - y[j]
+        _acceleration_into(shifted[:n], shifted[n:], t, model, counters, column)
+        for i in range(n):
+            jacobian[n + i, j] = (column[i] - a[i]) / step
+        shifted[j] = y[j]
+    counters[RHS_EVALS] += size
+    counters[JACOBIAN_EVALS] += size + 1
+    counters[FACTORIZATIONS] += size
+
+
+@njit(cache=True)
+def _factor(lu, pivots, jacobian, gamma, state, counters):
+    """The LU factors of I − γJ into ``lu``, ``pivots``; γ noted in ``state``.  False when the
+    matrix is singular (scipy's ``lu_factor`` then warns, and the Python path's iteration
+    diverges to a non-finite correction)."""
+    size = jacobian.shape[0]
+    for i in range(size):
+        for j in range(size):
+            lu[i, j] = (1.0 if i == j else 0.0) - gamma * jacobian[i, j]
+    state[FACTORED_GAMMA] = gamma
+    counters[FACTORIZATIONS] += 1
+    return lu_factor_into(lu, pivots)
+
+
+@njit(cache=True, inline="always")
+def _iterate(t, psi, gamma, lu, pivots, newton, stop_when_slow, model, counters, buffers):
+    """:meth:`NewtonSolver._iterate <adapters.integrators.newton.NewtonSolver._iterate>` from
+    the guess in ``buffers``' iterate (2n,), in place: whether it converged (scaled correction
+    ≤ ``tol``)."""
+    tol, max_iter, slow_rate = newton
+    _, _, y_new, dy, a = buffers
+    size = y_new.shape[0]
+    n = size // 2
+    previous = -1.0
+    for _ in range(max_iter):
+        _count_evaluation(counters)
+        _acceleration_into(y_new[:n], y_new[n:], t, model, counters, a)
+        for i in range(size):
+            f = y_new[n + i] if i < n else a[i - n]
+            dy[i] = -(y_new[i] - gamma * f - psi[i])
+        lu_solve_into(lu, pivots, dy)
+        counters[NEWTON_ITERATIONS] += 1
+        scaled = 0.0  # max |dy_i| / (1 + |y_i|), NaN when one is (as np.max gives it)
+        for i in range(size):
+            y_new[i] = y_new[i] + dy[i]
+            ratio = abs(dy[i]) / (1.0 + abs(y_new[i]))
+            if ratio > scaled or ratio != ratio:
+                scaled = ratio
+        if not np.isfinite(scaled):
+            return False
+        if scaled <= tol:
+            return True
+        if stop_when_slow and previous >= 0.0 and scaled > slow_rate * previous:
+            return False
+        previous = scaled
+    return False
+
+
+@njit(cache=True, inline="always")
+def _newton_solve(t, gamma, t_start, y_start, f_start, dt, method, model, counters, buffers):
+    """:meth:`NewtonSolver.solve <adapters.integrators.newton.NewtonSolver.solve>`: y solving
+    y − γ f(t, y) − ψ = 0 (ψ in ``buffers``) into ``buffers``' iterate from the explicit Euler
+    predictor y_start + dt·f_start, J at the last accepted state (t_start, y_start, f there);
+    False when the iteration did not converge even with a fresh J."""
+    newton, jacobian, lu, pivots, state = method[2], method[6], method[7], method[8], method[9]
+    a_start, psi, y_new = buffers[0], buffers[1], buffers[2]
+    fresh = state[HAS_JACOBIAN] == 0.0
+    if fresh:
+        _refresh_jacobian(jacobian, t_start, y_start, a_start, model, counters)
+        state[HAS_JACOBIAN], state[FACTORED_GAMMA] = 1.0, np.nan
+    factored = True
+    if not state[FACTORED_GAMMA] == gamma:
+        factored = _factor(lu, pivots, jacobian, gamma, state, counters)
+    while True:
+        for e in range(y_new.shape[0]):
+            y_new[e] = y_start[e] + dt * f_start[e]
+        converged = factored and _iterate(t, psi, gamma, lu, pivots, newton, not fresh, model,
+                                          counters, buffers)
+        if converged or fresh:
+            return converged
+        _refresh_jacobian(jacobian, t_start, y_start, a_start, model, counters)
+        factored = _factor(lu, pivots, jacobian, gamma, state, counters)
+        fresh = True
+
+
+@njit(cache=True, inline="always")
+def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buffers):
+    """One step of :meth:`MultistepIntegrator._step_impl
+    <adapters.integrators.multistep.MultistepIntegrator._step_impl>` from (q, q̇) at t: the new
+    (q, q̇), each (n,), and False when Newton's iteration failed.  ``buffers`` (q̈ at the start
+    (n,), ψ, the Newton iterate and its correction (2n,) each, q̈ at the iterate (n,)) are the
+    run's, overwritten."""
+    alpha, beta, start_tableau, history, held = method[0], method[1], method[3], method[4], \
+        method[5]
+    a, psi, y_new = buffers[0], buffers[1], buffers[2]
+    n = q.shape[0]
+    _count_evaluation(counters)
+    _acceleration_into(q, v, t, model, counters, a)
+    for j in range(history.shape[0] - 1, 0, -1):
+        history[j] = history[j - 1]
+    for e in range(n):
+        history[0, 0, e], history[0, 0, n + e] = q[e], v[e]
+        history[0, 1, e], history[0, 1, n + e] = v[e], a[e]
+    held[0] = min(held[0] + 1, history.shape[0])
+    if held[0] < history.shape[0]:
+        q_new, v_new = _nystrom_step(q, v, t, dt, start_tableau, model, partition, PLAIN,
+                                     counters)
+        return q_new, v_new, True
+    psi[:] = 0.0
+    for j in range(1, history.shape[0] + 1):
+        for e in range(2 * n):
+            if j < alpha.shape[0]:
+                psi[e] -= alpha[j] * history[j - 1, 0, e]
+            if j < beta.shape[0]:
+                psi[e] += dt * beta[j] * history[j - 1, 1, e]
+    if beta[0] == 0.0:
+        return psi[:n].copy(), psi[n:].copy(), True
+    converged = _newton_solve(t_new, dt * beta[0], t, history[0, 0], history[0, 1], dt, method,
+                              model, counters, buffers)
+    return y_new[:n].copy(), y_new[n:].copy(), converged
+
+
+@njit(cache=True)
+def run_samples(q, v, t0, dt, first, targets, method, model, stabilisation, projection,
+                partition, check_due, limit, passage, counters, q_out, v_out):
+    """A fixed-step run of a linear multistep method from the state after step ``first``
+    through every step index of ``targets``, keeping the state at each: the arguments and
+    results of :func:`adapters.inhouse.compiled.run_samples`, with ``method``
+    (:func:`method_arguments`) in the tableau's place; ``stabilisation`` is
+    :data:`~adapters.inhouse.compiled.PLAIN` or :data:`~adapters.inhouse.compiled.PROJECTED`,
+    ``check_due`` and ``passage`` are not read (no partitioning, no placed passages: the
+    Python path places none for multistep methods).  A Newton failure ends the run with
+    :data:`~adapters.inhouse.compiled.FAILED_NEWTON`, any other exception in a step with
+    :data:`~adapters.inhouse.compiled.FAILED_LINALG`."""
+    proj_tol, proj_max_iter, cut = projection
+    n = q.shape[0]
+    states = np.empty((1, 2, n))
+    buffers = (np.empty(n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(n))
+    k = first
+    reached = 0
+    while True:
+        _hold(states, 0, q, v)
+        reached = _keep_targets(states, 0, k, targets, reached, q_out, v_out)
+        if reached == targets.shape[0]:
+            return q, v, k, RUNNING, reached
+        t, t_new = t0 + k * dt, t0 + (k + 1) * dt
+        try:
+            q_new, v_new, converged = _multistep_step(q, v, t, t_new, dt, method, model,
+                                                      partition, counters, buffers)
+            if converged and stabilisation == PROJECTED:
+                q_new, v_new, _ = _project(q_new, v_new, t_new, model[ROWS], proj_tol,
+                                           proj_max_iter, cut, model[CONSTRAINT_ARGS],
+                                           model[SPARSITY], model[GENERATED], counters)
+        except Exception:  # noqa: BLE001 — LAPACK failures end the run as "failed"
+            return q, v, k, FAILED_LINALG, reached
+        if not converged:
+            return q, v, k, FAILED_NEWTON, reached
+        q, v, status = _checked(q, v, q_new, v_new, limit)
+        if status != RUNNING:
+            return q, v, k, status, reached
+        k += 1
