@@ -442,6 +442,14 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
 
 
 @njit(cache=True, inline="always")
+def _hold_and_keep(states, q, v, k, targets, reached, q_out, v_out):
+    """Hold the state (q, q̇) after step ``k`` in slot 0 of ``states`` and keep it as
+    :func:`_keep_targets` does: the top of a stepping loop; the new count of targets reached."""
+    _hold(states, 0, q, v)
+    return _keep_targets(states, 0, k, targets, reached, q_out, v_out)
+
+
+@njit(cache=True, inline="always")
 def _keep_targets(states, s, k, targets, reached, q_out, v_out):
     """Keep (q, q̇) = ``states[s]``, the state after step ``k``, in the rows of ``q_out``,
     ``v_out`` of every target from ``reached`` on that is at most ``k``, entry by entry (a row
@@ -560,8 +568,7 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
     k = first
     reached = 0
     while True:
-        _hold(states, 0, q, v)
-        reached = _keep_targets(states, 0, k, targets, reached, q_out, v_out)
+        reached = _hold_and_keep(states, q, v, k, targets, reached, q_out, v_out)
         if reached == targets.shape[0]:
             return q, v, k, RUNNING, reached
         t = t0 + k * dt

@@ -28,8 +28,8 @@ from numba import njit
 from adapters.inhouse.compiled import (CONSTRAINT_ARGS, FACTORIZATIONS, FAILED_LINALG,
                                        FAILED_NEWTON, GENERATED, JACOBIAN_EVALS,
                                        NEWTON_ITERATIONS, PLAIN, PROJECTED, RHS_EVALS, ROWS,
-                                       RUNNING, SPARSITY, _checked, _count_evaluation, _hold,
-                                       _keep_targets, _kernel_acceleration, _nystrom_step,
+                                       RUNNING, SPARSITY, _checked, _count_evaluation,
+                                       _hold_and_keep, _kernel_acceleration, _nystrom_step,
                                        _project, step_tableau)
 from adapters.inhouse.generated import ACCELERATION
 from adapters.integrators.multistep import LinearMultistep, points_read
@@ -288,8 +288,7 @@ def run_samples(q, v, t0, dt, first, targets, method, model, stabilisation, proj
     k = first
     reached = 0
     while True:
-        _hold(states, 0, q, v)
-        reached = _keep_targets(states, 0, k, targets, reached, q_out, v_out)
+        reached = _hold_and_keep(states, q, v, k, targets, reached, q_out, v_out)
         if reached == targets.shape[0]:
             return q, v, k, RUNNING, reached
         t, t_new = t0 + k * dt, t0 + (k + 1) * dt
