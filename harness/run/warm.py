@@ -41,13 +41,11 @@ def _prepare_without_main(data: dict) -> None:
 multiprocessing.spawn.prepare = _prepare_without_main
 
 #: (scenario, adapter, method, dt, t_end) run once in the template, their results discarded: the
-#: planar and spatial in-house paths (default and best methods, which load most kernels, and an
-#: implicit multistep method, whose compiled loop is its own) and an engine.  A kernel they miss
-#: is loaded by the first case that needs it, as in a cold worker.
+#: planar and spatial in-house paths (default and best methods, which load most kernels) and an
+#: engine.  A kernel they miss is loaded by the first case that needs it, as in a cold worker.
 WARM_UP = (
     ("fourbar", "inhouse", "best", 1e-3, 0.02),
     ("fourbar", "inhouse", "default", 1e-3, 0.02),
-    ("fourbar", "inhouse", "bdf2+baumgarte", 1e-3, 0.02),
     ("fourbar_spatial", "inhouse", "best", 1e-3, 0.02),
     ("fourbar", "mujoco", "best", 1e-3, 0.02),
 )
