@@ -43,6 +43,7 @@ from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabil
 from adapters.inhouse.states import body_states
 from adapters.integrators import integrator_class
 from adapters.integrators.multistep import LinearMultistep
+from adapters.integrators.newton import non_convergence
 from adapters.integrators.nystrom import NystromIntegrator
 from harness.model.mechanism import Mechanism
 from harness.model.trajectory import BodyStates
@@ -110,12 +111,11 @@ class CompiledStepper(FormulationStepper):
         self._code = COMPILED_FORMULATIONS[formulation_class.name]
         method_class = integrator_class(integrator_name)
         self._multistep = issubclass(method_class, LinearMultistep)
+        #: The method's arguments of the compiled loop: a Nyström tableau, or a multistep method
+        #: with its history and Newton state.
         if self._multistep:
-            #: The method's arguments of the compiled loop (a Nyström tableau, or a multistep
-            #: method with its history and Newton state).
             self._method = compiled_multistep.method_arguments(
                 method_class, integrator_params, self._start_state[0].size)
-            self._newton = (integrator_params.get("tol"), integrator_params.get("max_iter"))
             # At least one right-hand side a step, two for an implicit method (its iteration
             # evaluates once at least).
             calls_per_step = 1 if method_class.beta[0] == 0.0 else 2
@@ -315,9 +315,9 @@ class CompiledStepper(FormulationStepper):
         if status == compiled.DIVERGED_NONFINITE:
             return "diverged", "non-finite state"
         if status == compiled.FAILED_NEWTON and self._multistep:
-            tol, max_iter = self._newton
-            return "failed", (f"StepFailure: Newton iteration did not converge in {max_iter} "
-                              f"iterations to tol={tol:g} at t={(self.steps + 1) * self.grid.dt:.6g}")
+            tol, max_iter, _ = self._method[2]  # method_arguments' (tol, max_iter, slow rate)
+            return "failed", "StepFailure: " + non_convergence(max_iter, tol,
+                                                               (self.steps + 1) * self.grid.dt)
         if status == compiled.FAILED_NEWTON:
             return "failed", (f"StepFailure: dependent coordinates did not converge (max |Φ| = "
                               f"{failure[1]:.3g}) at t = {failure[2]:g}")

@@ -67,6 +67,12 @@ def problem_jacobian(owner, t, y, a0):
     return jacobian
 
 
+def non_convergence(max_iter: int, tol: float, t: float) -> str:
+    """Why a step failed when Newton's iteration toward t (s) did not converge, as both stepping
+    paths word it (:class:`NewtonSolver`, :mod:`adapters.inhouse.compiled_multistep`)."""
+    return f"Newton iteration did not converge in {max_iter} iterations to tol={tol:g} at t={t:.6g}"
+
+
 def scaled_norm(dy, y):
     """max_i |dy_i| / (1 + |y_i|): the mixed absolute/relative size of a Newton correction."""
     return float(np.max(np.abs(dy) / (1.0 + np.abs(y))))
@@ -133,8 +139,7 @@ class NewtonSolver:
             if converged:
                 return y
             if fresh:
-                raise StepFailure(f"Newton iteration did not converge in {self.max_iter} "
-                                  f"iterations to tol={self.tol:g} at t={t:.6g}")
+                raise StepFailure(non_convergence(self.max_iter, self.tol, t))
             self._refresh_jacobian(*jacobian_point)
             self._factor(gamma)
             fresh = True
