@@ -46,13 +46,14 @@ RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILE
 
 #: The members of the model tuple the compiled loop reads, by name: the Baumgarte gains (α, β),
 #: the constraint rows, the constraint kernels' arguments, the force kernels' arguments, the
-#: sparsity arrays of Φ_q, the generated functions, and the functions of the generated steps
-#: (:func:`_generated_run`: the generated ones when every function the formulation calls was
-#: generated, else :data:`~adapters.inhouse.generated.NOTHING`, so that a step never computes its
-#: stages twice).  numba folds these module constants into the tuple's indexing, so the names cost
-#: nothing; a named tuple in their place made the generated loop's step 2–3 % slower
-#: (docs/measurements.md, "Named model tuple").
-GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED, GENERATED_STEP = range(7)
+#: sparsity arrays of Φ_q, the generated functions, and whether the generated steps run
+#: (:func:`_generated_run`: only when every function the formulation calls was generated, so that
+#: a step never computes its stages twice).  That is a flag and not a second tuple of the
+#: functions: converting a generated function into a call's argument costs ~2.5 µs (numba asks
+#: Python for its address), 12 µs a tuple of five.  numba folds these module constants into the
+#: tuple's indexing, so the names cost nothing; a named tuple in their place made the generated
+#: loop's step 2–3 % slower (docs/measurements.md, "Named model tuple").
+GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED, GENERATED_STEPS = range(7)
 
 #: What :func:`_generated_run` returns when one of its functions declined a call of the next step
 #: (a guard, or :data:`~adapters.inhouse.generated.NEVER`): nothing of that step was kept, the
@@ -373,7 +374,7 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
     reached : int
         Number of ``targets`` whose state is kept in ``q_out``, ``v_out`` already.
     generated : tuple
-        The functions of the generated step (``model[GENERATED_STEP]``).
+        The generated functions (``model[GENERATED]``), every one the formulation calls made.
     buffers : tuple
         :func:`_step_buffers`; the state after step ``k`` in slot 0 of ``buffers[3]``.
     (the others as :func:`run_samples`)
@@ -600,9 +601,9 @@ def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projec
             status = DECLINED
             # On to the end, a passage (planned again at the top, with the same inputs) or a
             # declined step.
-            if stabilisation != PARTITIONED:
+            if stabilisation != PARTITIONED and model[GENERATED_STEPS]:
                 slot, k, reached, status = _generated_run(
-                    k, targets, reached, t0, dt, tableau, model[GENERATED_STEP], stabilisation,
+                    k, targets, reached, t0, dt, tableau, model[GENERATED], stabilisation,
                     projection, limit, passage, counters, buffers, q_out, v_out)
                 q, v = states[slot, 0], states[slot, 1]
             if status == DECLINED:  # one step on the full path
@@ -635,9 +636,8 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
         :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
         :attr:`ConstraintSystem.sparsity`'s arrays, the five generated functions of
-        :func:`.generated.functions`, and those of the generated step: the same five, or
-        :data:`~.generated.NOTHING` unless every one the formulation calls was generated;
-        :data:`GENERATED_STEP`).
+        :func:`.generated.functions`, and whether the generated steps run, bool: every
+        function the formulation calls was generated; :data:`GENERATED_STEPS`).
     stabilisation : int
         :data:`PLAIN`, :data:`PROJECTED` (``direct``) or :data:`PARTITIONED`.
     projection : tuple (proj_tol, proj_max_iter, cut)
