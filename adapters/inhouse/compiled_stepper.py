@@ -166,7 +166,11 @@ class CompiledStepper(FormulationStepper):
         if self._code == compiled.PARTITIONED:
             dispatcher, args = compiled.run_steps, self._steps_args(0)
         else:
-            dispatcher = (compiled_multistep if self._multistep else compiled).run_samples
+            dispatcher = compiled.run_samples
+            if self._multistep:
+                dispatcher = (compiled_multistep.run_explicit_samples
+                              if method_class.beta[0] == 0.0
+                              else compiled_multistep.run_samples)
             args = self._samples_args(np.zeros(0, np.int64))
         dispatcher(*args)
         self._entry = _compiled_entry(dispatcher, args)
