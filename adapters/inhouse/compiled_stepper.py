@@ -20,9 +20,9 @@ call (:func:`compiled.run_samples`): the first :meth:`CompiledStepper._step_to` 
 every sample time of the grid and keeps the states there, and the later calls hand them out (a
 failure is raised at the first sample after it, as step-by-step stepping raises it): a call
 costs ~16 µs of converting its arguments (12 µs of it the five generated functions, whose
-addresses numba asks Python for; the ~70 arrays and numbers take 0.06–0.1 µs each), more than a
-pendulum's ten steps between two samples.  Partitioning steps from sample to sample: reading its state moves the Newton start of
-the dependent coordinates.
+addresses numba asks Python for; the ~65 arrays and numbers take 0.06–0.1 µs each), more than a
+pendulum's ten steps between two samples.  Partitioning steps from sample to sample: reading its
+state moves the Newton start of the dependent coordinates.
 
 Both calls go to the compiled function directly (:func:`_compiled_entry`), not through numba's
 dispatcher, whose typing of the arguments cost ~0.3 ms a call: the model tuple holds the generated
