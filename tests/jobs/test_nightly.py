@@ -8,10 +8,14 @@ the campaign's workers sharing two cores) made a repetition ×4–5 slower: a `m
 two of three repetitions so, and the gate flagged both in-house cases.  The regressions are
 injected by replacing the nightly's work function (``harness.jobs.nightly.case_work``, pytest
 ``monkeypatch``) with one that reports one case's error 1000 times larger and another case's
-wall time 20 times longer; the adapters have no such switch.  Measured calibrated time ratios
-between two plain runs: 0.78–1.2 on an idle machine, up to 2.03 with a second test session on
-the same two cores — so the runs here use a time factor of 4
-(the command's default is 2) and the injected slowdown is 20.  About 30 s.
+wall time 10,000 times longer; the adapters have no such switch.  Measured calibrated time
+ratios between two plain runs: 0.78–1.2 on an idle machine, up to 2.03 with a second test
+session on the same two cores, and 4.28 (the Pinocchio case, over the factor of 4 used then) in
+a fresh clone's cold ``make test`` (2026-11-27), the other test worker compiling kernels.  A
+repeat's time is the machine's load, not the code's, so the runs here use a time factor of 50
+(the command's default is 2) and the injected slowdown is 10,000: the test checks that the gate
+names a slower case and passes a repeat, not how small a slowdown it tells from the load.
+About 30 s.
 """
 
 from __future__ import annotations
@@ -48,10 +52,10 @@ dts = [1e-3]
 LESS_ACCURATE = "fourbar|inhouse|rk4+baumgarte|0.0001|1.0"
 SLOWER = "fourbar|pinocchio|best|0.001|1.0"
 #: The calibrated-time threshold of these runs (see the module docstring).
-TIME_FACTOR = 4.0
+TIME_FACTOR = 50.0
 #: Injected factors: far past the thresholds (10 on the error, TIME_FACTOR on the time).
 ERROR_INJECTED = 1e3
-TIME_INJECTED = 20.0
+TIME_INJECTED = 1e4
 
 
 @dataclass(frozen=True)
