@@ -15,8 +15,8 @@ on the scaled correction.  ``direct`` then projects the new state (eqs. 127, 137
 from the generated right-hand side where it serves, else from the kernels (``kernel_calls``).
 
 The explicit methods (β₀ = 0) run in a loop of their own, :func:`run_explicit_samples`: the
-same steps without the Newton code, which cost their steps ~0.45 µs each in the common loop even
-where it never ran, and without an array made per step.
+same steps without the Newton code, which cost their steps ~0.45 µs each in the implicit
+methods' loop even where it never ran, and without an array made per step.
 
 The numbers agree with the Python path's to the Newton tolerance, not to the bit: the LU
 factorisation is written out here (partial pivoting, LAPACK's choice of pivots, its own order
@@ -272,9 +272,9 @@ def _explicit_part(alpha, beta, history, dt, e):
 
 @njit(cache=True, inline="always")
 def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buffers):
-    """One step of :meth:`MultistepIntegrator._step_impl
-    <adapters.integrators.multistep.MultistepIntegrator._step_impl>` from (q, q̇) at t: the new
-    (q, q̇), each (n,), and False when Newton's iteration failed.  ``buffers`` (q̈ at the start
+    """One step of an implicit method (β₀ ≠ 0), as :meth:`MultistepIntegrator._step_impl
+    <adapters.integrators.multistep.MultistepIntegrator._step_impl>` takes it, from (q, q̇) at
+    t: the new (q, q̇), each (n,), and False when Newton's iteration failed.  ``buffers`` (q̈ at the start
     (n,), ψ, the Newton iterate and its correction (2n,) each, q̈ at the iterate (n,)) are the
     run's, overwritten."""
     alpha, beta, start_tableau, history = method[0], method[1], method[3], method[4]
@@ -286,8 +286,6 @@ def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buff
         return q_new, v_new, True
     for e in range(2 * n):
         psi[e] = _explicit_part(alpha, beta, history, dt, e)
-    if beta[0] == 0.0:
-        return psi[:n].copy(), psi[n:].copy(), True
     converged = _newton_solve(t_new, dt * beta[0], t, history[0, 0], history[0, 1], dt, method,
                               model, counters, buffers)
     return y_new[:n].copy(), y_new[n:].copy(), converged
@@ -308,7 +306,8 @@ def _projected(q, v, t, projection, model, counters):
 @njit(cache=True)
 def run_samples(q, v, t0, dt, first, targets, method, model, stabilisation, projection,
                 partition, check_due, limit, passage, counters, q_out, v_out):
-    """A fixed-step run of a linear multistep method from the state after step ``first``
+    """A fixed-step run of an implicit linear multistep method (Adams–Moulton, BDF: β₀ ≠ 0;
+    the explicit ones run on :func:`run_explicit_samples`) from the state after step ``first``
     through every step index of ``targets``, keeping the state at each: the arguments and
     results of :func:`adapters.inhouse.compiled.run_samples`, with ``method``
     (:func:`method_arguments`) in the tableau's place; ``stabilisation`` is
@@ -349,8 +348,9 @@ def run_explicit_samples(q, v, t0, dt, first, targets, method, model, stabilisat
     and numbers, in a loop without Newton's iteration that makes no array a step.  The new
     state is written into one of two slots, in turn, never the one holding the current state;
     only the RK4 start steps and ``direct``'s projection return new arrays.  On the spatial
-    four-bar (ab5) a step took 1.81 µs here against 2.33 µs in :func:`run_samples`, whose
-    Newton code costs its explicit steps ~0.45 µs even where it never runs."""
+    four-bar (ab5) a step took 1.81 µs here against 2.33 µs in :func:`run_samples`, where the
+    explicit methods ran before: its Newton code cost their steps ~0.45 µs even where it never
+    ran."""
     n = q.shape[0]
     alpha, beta, start_tableau, history = method[0], method[1], method[3], method[4]
     states = np.empty((1, 2, n))
