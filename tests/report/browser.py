@@ -8,8 +8,16 @@ import shutil
 import subprocess
 from pathlib import Path
 
+import pytest
+
 CHROMIUM = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists()
                                         else None)
+
+#: Marks a test module that runs Chromium: skipped, saying why, where it is not installed (the
+#: README's set-up installs Python packages only; ``.ci/run`` installs Chromium where it runs as root).
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None, reason="Debian's chromium is not installed (apt-get install -y chromium; "
+                             ".ci/run installs it where it runs as root)")
 
 FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
          "--disable-background-networking", "--disable-component-update", "--disable-sync",

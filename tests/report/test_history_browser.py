@@ -7,14 +7,12 @@ from __future__ import annotations
 import json
 import re
 
-import pytest
-
 from harness.report.history import find_changes
 from harness.report.history_page import build_history
 from tests.report.history_cases import case, history
-from tests.report.browser import CHROMIUM, LAPTOP, _chromium, _console, _page_requests
+from tests.report.browser import LAPTOP, _chromium, _console, _page_requests, needs_chromium
 
-pytestmark = pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
+pytestmark = needs_chromium
 
 #: Appended to the page: choose scenario "slider_crank", then "with changes only", and record
 #: how many figures each choice leaves shown.

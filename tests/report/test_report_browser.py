@@ -19,7 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from tests.report.browser import LAPTOP, PHONE, _chromium, _console, _page_requests
+from tests.report.browser import (LAPTOP, PHONE, _chromium, _console, _page_requests,
+                                  needs_chromium)
+
+pytestmark = needs_chromium
 
 PROBE = """
 <script>
