@@ -26,9 +26,9 @@ from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_
                                      pattern_rmatvec)
 from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
 from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import (_cholesky, back_substitution, certified_spd_solve,
-                                     column_gram, forward_substitution, matvec, rmatvec,
-                                     skippable, truncated_solve, weighted_gram)
+from adapters.inhouse.linalg import (_cholesky, back_substitution, certified_solve, column_gram,
+                                     forward_substitution, matvec, rmatvec, skippable,
+                                     truncated_solve, weighted_gram)
 from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
@@ -172,7 +172,9 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     (c = 4 tr J̄ / 3, the mean of the block's other eigenvalues 4 J̄_i on the manifold).  The
     block-diagonal M' is solved body by body (:func:`_block_solve_into`) for the rows of Φ_q
     that touch the body (``sparsity_arrays``, :attr:`~adapters.inhouse.banded.Sparsity.arrays`),
-    S = Φ_q M'⁻¹ Φ_qᵀ by :func:`~adapters.inhouse.linalg.certified_spd_solve`.
+    S = Φ_q M'⁻¹ Φ_qᵀ by :func:`~adapters.inhouse.linalg.certified_solve` (redundant rows
+    included: S is then singular, and the certified pivoted factorisation solves it as the
+    truncated SVD would).
 
     Returns
     -------
@@ -207,8 +209,8 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
             i = body_rows[p]
             _block_solve_into(weighted, i, k, jac[i], masses[b], rotation_inverse)
     free = free[0]
-    certified, mu = certified_spd_solve(_gram_of_rows(jac, weighted, sparsity_arrays[0], nc),
-                                        target - matvec(jac, free), cut)
+    certified, mu = certified_solve(_gram_of_rows(jac, weighted, sparsity_arrays[0], nc),
+                                    target - matvec(jac, free), cut)
     if not certified:
         return False, np.empty(0)
     return True, free + rmatvec(weighted, mu)
@@ -510,7 +512,10 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     eq. 77 turns round-off there into acceleration spikes (the error grows as dt shrinks).
     Redundant rows (σ = 0 everywhere) need no elimination beforehand.  Where the matrix is
     certified far from the cut (:func:`~adapters.inhouse.linalg.certified_spd_solve`, the common
-    case) a Cholesky solve replaces the SVD, and planar (diagonal) mass matrices use M⁻¹ directly.
+    case) a Cholesky solve replaces the SVD, and where its redundant directions are certified
+    below the cut and the others above it, a pivoted one
+    (:func:`~adapters.inhouse.linalg.semidefinite_solve`); planar (diagonal) mass matrices use
+    M⁻¹ directly.
 
     Parameters
     ----------
@@ -576,9 +581,10 @@ def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
 
 @njit(cache=True)
 def _multipliers(reduced, residual, cut):
-    """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): Cholesky where
-    certified, else the truncated SVD at ``cut``, shape (m,)."""
-    certified, mu = certified_spd_solve(reduced, residual, cut)
+    """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): Cholesky (plain or
+    pivoted, :func:`~adapters.inhouse.linalg.certified_solve`) where certified, else the
+    truncated SVD at ``cut``, shape (m,)."""
+    certified, mu = certified_solve(reduced, residual, cut)
     if not certified:
         mu = truncated_solve(reduced, residual, cut)
     return mu
@@ -611,8 +617,8 @@ def diagonal_mass_acceleration(inverse, jacobian, force, gamma, cut):
         False when S has no certificate (the caller then solves the M̃ form).
     acceleration : ndarray, shape (n,) or (0,)
     """
-    certified, mu = certified_spd_solve(weighted_gram(jacobian, inverse),
-                                        gamma - matvec(jacobian, inverse * force), cut)
+    certified, mu = certified_solve(weighted_gram(jacobian, inverse),
+                                    gamma - matvec(jacobian, inverse * force), cut)
     if not certified:
         return False, np.empty(0)
     return True, inverse * (force + rmatvec(jacobian, mu))

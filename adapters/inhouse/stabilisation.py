@@ -89,8 +89,9 @@ class Formulation(SecondOrderSystem):
         if rank < self.constraints.m:
             dropped = sorted(set(range(self.constraints.m)) - set(np.sort(rows).tolist()))
             labels = ", ".join(self.constraints.labels[i] for i in dropped)
-            what = ("kept: the solves are rank-revealing (truncated SVD), the reactions the "
-                    "minimum-norm split" if self.keeps_redundant_rows else
+            what = ("kept: the solves are rank-revealing (a certified pivoted Cholesky "
+                    "factorisation, else the truncated SVD), the reactions the minimum-norm split"
+                    if self.keeps_redundant_rows else
                     "dropped; the reaction split among the redundant joints is not unique")
             self.notes.append(f"{len(dropped)} redundant equation(s) ({labels}) {what}")
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
