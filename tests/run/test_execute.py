@@ -34,9 +34,9 @@ class ToySpec:
 
 def toy_work(spec: ToySpec):
     """Misbehave as the spec's name says, else return a row with the worker's thread settings."""
-    if spec.pid_file:
-        with open(spec.pid_file, "w") as handle:
-            handle.write(str(os.getpid()))
+    if spec.pid_file:  # written whole, then renamed: a reader that sees the file sees the pid
+        Path(spec.pid_file + ".part").write_text(str(os.getpid()))
+        os.replace(spec.pid_file + ".part", spec.pid_file)
     if spec.name.startswith("sigkill"):
         os.kill(os.getpid(), signal.SIGKILL)
     if spec.name.startswith("sleep"):

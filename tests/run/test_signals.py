@@ -248,8 +248,9 @@ class SleepSpec:
 
 
 def sleep_work(spec: SleepSpec):
-    if spec.pid_file:
-        Path(spec.pid_file).write_text(str(os.getpid()))
+    if spec.pid_file:  # written whole, then renamed: a reader that sees the file sees the pid
+        Path(spec.pid_file + ".part").write_text(str(os.getpid()))
+        os.replace(spec.pid_file + ".part", spec.pid_file)
         time.sleep(600)
     return {"name": spec.name, "status": "ok"}, None
 
