@@ -208,11 +208,18 @@ def certified_spd_solve(matrix, rhs, cut):
     positive, lower = _cholesky(matrix)
     if not positive:
         return False, np.empty(0)
-    size = _frobenius(matrix)
-    if not (size * _comparison_bound(lower) * BOUND_MARGIN * cut < 1.0
-            or size * _inverse_frobenius_squared(lower) * BOUND_MARGIN * cut < 1.0):
+    if not _condition_certified(_frobenius(matrix), lower, cut):
         return False, np.empty(0)
     return True, _cholesky_solve(lower, rhs)
+
+
+@njit(cache=True)
+def _condition_certified(size, lower, cut):
+    """True when ``size`` ‖L⁻¹‖₂² (size = ‖S‖_F, L = ``lower`` (k, k) its Cholesky factor, or
+    that of a principal submatrix of S) is certified below 1/(BOUND_MARGIN · cut): by
+    :func:`_comparison_bound` first, else by ‖L⁻¹‖_F² (:func:`certified_spd_solve`)."""
+    return (size * _comparison_bound(lower) * BOUND_MARGIN * cut < 1.0
+            or size * _inverse_frobenius_squared(lower) * BOUND_MARGIN * cut < 1.0)
 
 
 #: :func:`semidefinite_solve` leaves out only directions whose eigenvalues it certifies below this
@@ -350,9 +357,10 @@ def semidefinite_solve(matrix, rhs, cut):
     - above the cut: λ_min(L₁₁L₁₁ᵀ) ≥ 1/‖L₁₁⁻¹‖₂² (bounded as in :func:`certified_spd_solve`)
       exceeds BOUND_MARGIN · cut · ‖S‖_F; by interlacing, S's rank-th eigenvalue is at least
       that of its principal submatrix L₁₁L₁₁ᵀ, so the truncated SVD keeps rank directions;
-    - below it: 2 √k ‖S N‖_F · BOUND_MARGIN < cut · ‖S‖_F; S then has k − rank eigenvalues
-      within 2‖S N‖_F of zero (a residual bound for the orthonormal N), below
-      cut · λ_max(S) (λ_max ≥ ‖S‖_F/√k), which the truncated SVD drops.
+    - below it: 2 √k ‖S N‖_F · BOUND_MARGIN < min(cut, NULL_LEVEL) · ‖S‖_F; S then has
+      k − rank eigenvalues within 2‖S N‖_F of zero (a residual bound for the orthonormal N),
+      below cut · λ_max(S) (λ_max ≥ ‖S‖_F/√k), which the truncated SVD drops; and null to
+      round-off (:data:`NULL_LEVEL`), not merely small.
 
     Returns
     -------
@@ -369,8 +377,7 @@ def semidefinite_solve(matrix, rhs, cut):
         for j in range(rank):
             lower[i, j] = factor[order[i], j] if j <= i else 0.0
     size = _frobenius(matrix)
-    if not (size * _comparison_bound(lower) * BOUND_MARGIN * cut < 1.0
-            or size * _inverse_frobenius_squared(lower) * BOUND_MARGIN * cut < 1.0):
+    if not _condition_certified(size, lower, cut):
         return False, np.empty(0)
     basis = _null_basis(factor, order, lower)
     if not 2.0 * np.sqrt(k) * _product_frobenius(matrix, basis) * BOUND_MARGIN \
