@@ -16,7 +16,7 @@ import argparse
 import signal
 import sys
 
-from harness.common import jsonout
+from harness.common import capture, jsonout, waits
 from harness.common.errors import MbhError
 from harness.common.numbers import format_number
 
@@ -34,6 +34,7 @@ BOUNDS_HELP = ("the verdict's bounds as NAME=VALUE,...: gap (joint gap / mechani
                % vars(Bounds()))
 JSON_HELP = ('strict JSON on stdout; non-finite numbers as the strings "NaN", "Infinity", '
              '"-Infinity"')
+QUIET_HELP = "no progress lines on stderr (what is being compiled or built, and how long)"
 
 
 class UserError(MbhError):
@@ -542,6 +543,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("check", help="kinematic analysis: assembly, rank, mobility, redundancy")
     p.add_argument("name", nargs="?")
     p.add_argument("--all", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_check)
 
@@ -563,6 +565,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-end", type=float, default=None, help="end time, s (default: duration)")
     p.add_argument("--no-reference", action="store_true", help="skip the reference comparison")
     p.add_argument("--bounds", default=None, help=BOUNDS_HELP)
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_simulate)
 
@@ -695,8 +698,10 @@ def _positive_int(text: str) -> int:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    waits.show_on_stderr(quiet=getattr(args, "quiet", False))
     try:
-        return args.func(args)
+        with capture.answers_only_on_stdout():
+            return args.func(args)
     except UserError as error:
         print(f"mbh: {error}", file=sys.stderr)
         return 2

@@ -98,3 +98,61 @@ def test_check_all_json_is_strict():
 def test_listings_are_strict_json(capsys, argv):
     assert cli.main(argv) == 0
     strict_loads(capsys.readouterr().out)
+
+
+#: Runs the command line with C-level writes to descriptor 1 (C's printf, buffered, and a raw
+#: write) before and after the command's own work, as a solver or an engine makes them.
+_NOISY_MAIN = """
+import ctypes, os, sys
+from harness import cli
+
+libc = ctypes.CDLL(None)
+real_parser = cli.build_parser
+
+
+def noisy_parser():
+    parser = real_parser()
+    parse = parser.parse_args
+
+    def parse_noisily(argv=None):
+        args = parse(argv)
+        command = args.func
+
+        def noisy(namespace):
+            libc.printf(b"[C printf before the command]\\n")
+            os.write(1, b"[raw write before the command]\\n")
+            status = command(namespace)
+            libc.printf(b"[C printf after the command]\\n")
+            return status
+
+        args.func = noisy
+        return args
+
+    parser.parse_args = parse_noisily
+    return parser
+
+
+cli.build_parser = noisy_parser
+sys.exit(cli.main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("argv", [
+    ["simulate", "fourbar", "--adapter", "inhouse", "--method", "rk4+direct", "--dt", "1e-2",
+     "--t-end", "0.2"],
+    ["simulate", "slider_crank", "--adapter", "mujoco", "--method", "best", "--dt", "1e-3",
+     "--t-end", "0.2"],
+    ["check", "fourbar"],
+    ["reference", "fourbar", "--quiet"],
+    ["runs"],
+])
+def test_c_level_stdout_noise_never_reaches_the_json(argv, tmp_path):
+    result = subprocess.run([sys.executable, "-c", _NOISY_MAIN, *argv, "--json"],
+                            capture_output=True, text=True, timeout=600, cwd=ROOT,
+                            env={**os.environ, "MBH_RESULTS_DIR": str(tmp_path)})
+    assert result.returncode == 0, result.stderr
+    strict_loads(result.stdout)
+    for noise in ("[C printf before the command]", "[raw write before the command]",
+                  "[C printf after the command]"):
+        assert noise not in result.stdout
+        assert noise in result.stderr
