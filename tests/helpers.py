@@ -5,15 +5,19 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import re
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+import mbh
 from harness import cli
 from harness.model import scenario
+from harness.model.scenario import SCENARIO_DIR
 from harness.neutral.dynamics import start_accelerations
 
 #: The tests/ folder, the repository's root above it, and the committed test data.
@@ -156,3 +160,22 @@ def example_suite_files() -> dict[str, str]:
         if found:
             files[found.group(1)] = block
     return files
+
+
+def parallel_revolute_fourbar():
+    """The seed four-bar's file drawn in space with four revolutes about z: three redundant
+    equations (the two tilts of two joints)."""
+    fourbar = tomllib.loads((SCENARIO_DIR / "fourbar.toml").read_text(encoding="utf-8"))
+    builder = mbh.MechanismBuilder("fourbar_4r", kind="spatial", duration=1.0,
+                                   gravity=fourbar["gravity"])
+    for body in fourbar["bodies"]:
+        half = math.radians(body["angle_deg"]) / 2.0
+        builder = builder.body(body["name"], mass=body["mass"], inertia=body["inertia"],
+                               position=body["position"],
+                               quaternion=[math.cos(half), 0.0, 0.0, math.sin(half)])
+    for joint in fourbar["joints"]:
+        builder = builder.joint(joint["name"], "revolute", body1=joint["body1"],
+                                body2=joint["body2"], location=joint["location"],
+                                axis=[0.0, 0.0, 1.0])
+    return (builder.initial(driver="O", value=0.0, rate=0.0)
+            .output("crank_angle", "joint_angle", joint="O").build())

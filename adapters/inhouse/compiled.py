@@ -442,6 +442,42 @@ def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisatio
         current, k = new, k + 1
 
 
+@njit(cache=True)
+def run_generated_samples(q, v, t0, dt, first, targets, tableau, generated, stabilisation,
+                          projection, limit, passage, counters, q_out, v_out):
+    """:func:`run_samples` on the generated functions alone, for as long as they serve: the
+    steps of :func:`_generated_run` from the state (q, q̇) after step ``first``, keeping the state
+    at each target.  It calls no kernel, so it compiles in seconds where :func:`run_samples`, which
+    holds the kernels' path for every step a generated function declines, takes a minute or more:
+    the stepper calls this first and :func:`run_samples` only from where it stopped, compiling
+    that only when a run needs it (docs/speed.md, "What a first run compiles").
+
+    Parameters and the first four results are :func:`run_samples`'; ``generated`` is its
+    ``model[GENERATED]`` (every function the formulation calls generated), ``stabilisation``
+    :data:`PLAIN` or :data:`PROJECTED`.
+
+    Returns
+    -------
+    q, v : ndarray, shape (n,)
+        The state after step ``done`` (new arrays).
+    done : int
+    status : int
+        :data:`RUNNING` when every target was reached; :data:`DECLINED` when the full path must
+        go on from step ``done`` (a generated function declined step ``done + 1``, nothing of it
+        kept, or a passage is planned before it); else the divergence code of step ``done + 1``.
+    reached : int
+    """
+    buffers = _step_buffers(tableau, q)
+    states = buffers[3]
+    _hold(states, 0, q, v)
+    slot, k, reached, status = _generated_run(first, targets, 0, t0, dt, tableau, generated,
+                                              stabilisation, projection, limit, passage,
+                                              counters, buffers, q_out, v_out)
+    if status == RUNNING and reached < targets.shape[0]:  # a passage is planned
+        status = DECLINED
+    return states[slot, 0].copy(), states[slot, 1].copy(), k, status, reached
+
+
 @njit(cache=True, inline="always")
 def _hold_and_keep(states, q, v, k, targets, reached, q_out, v_out):
     """Hold the state (q, q̇) after step ``k`` in slot 0 of ``states`` and keep it as

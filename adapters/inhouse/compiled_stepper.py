@@ -24,19 +24,25 @@ addresses numba asks Python for; the ~65 arrays and numbers take 0.06–0.1 µs 
 pendulum's ten steps between two samples.  Partitioning steps from sample to sample: reading its
 state moves the Newton start of the dependent coordinates.
 
-Both calls go to the compiled function directly (:func:`_compiled_entry`), not through numba's
+Where every function the formulation calls was generated, a run starts on the generated steps'
+own loop (:func:`compiled.run_generated_samples`), which compiles in seconds; the full loop, with
+the kernels' path for a step a generated function declines, goes on from where that one hands a
+step over, and is compiled (a minute or more, once per machine) only when a run first does.
+
+Every call goes to the compiled function directly (:func:`.on_demand.entry`), not through numba's
 dispatcher, whose typing of the arguments cost ~0.3 ms a call: the model tuple holds the generated
 functions, which numba types in Python.
 """
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import compiled, compiled_multistep, generated
+from adapters.inhouse import compiled, compiled_multistep, generated, on_demand
 from adapters.inhouse.driver import FormulationStepper
 from adapters.inhouse.fold import Passages
 from adapters.inhouse.partition import CoordinatePartitioning
@@ -124,19 +130,6 @@ class CompiledStepper(FormulationStepper):
             self._method = compiled.step_tableau(method_class.tableau)
             calls_per_step = method_class.tableau.c.size
         self.passages = Passages.of(formulation, method_class)
-        calls = grid.steps(grid.t_end) * calls_per_step
-        wanted = self._wanted_functions()
-        functions = (generated.NOTHING if loop == "compiled" else self._generated_functions(
-            wanted, compile_new=loop == "generated" or calls >= AUTO_MIN_CALLS))
-        self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
-        #: Whether every function a step's end calls (the projection's parts, ρ̂) was generated.
-        self._step_ends_generated = len(wanted) > 1 and all(
-            functions[which] is not generated.NEVER for which in wanted[1:])
-        every_one = all(functions[which] is not generated.NEVER for which in wanted)
-        self._model = (np.asarray(formulation.gains, dtype=float),
-                       np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
-                       formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
-                       functions, every_one)
         params = formulation.params
         self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
                              float(formulation.cut)) if self._code == compiled.PROJECTED
@@ -161,19 +154,72 @@ class CompiledStepper(FormulationStepper):
         self._rows_from_start = dict(zip(self._sample_steps.tolist(),
                                          range(self._sample_steps.size)))
         self._partitioned = self._code == compiled.PARTITIONED
-        # Compile (or load from numba's cache) and find the compiled function outside the timed
-        # stepping.
-        if self._code == compiled.PARTITIONED:
-            dispatcher, args = compiled.run_steps, self._steps_args(0)
+        self._dispatcher = self._full_loop(method_class)
+        self._model = self._model_tuple(generated.NOTHING, False)  # the types of the real one
+        wanted = self._wanted_functions()
+        compile_new = (loop == "generated"
+                       or grid.steps(grid.t_end) * calls_per_step >= AUTO_MIN_CALLS
+                       or not on_demand.is_ready(self._dispatcher, self._full_args()))
+        functions = (generated.NOTHING if loop == "compiled"
+                     else self._generated_functions(wanted, compile_new))
+        self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
+        #: Whether every function a step's end calls (the projection's parts, ρ̂) was generated.
+        self._step_ends_generated = len(wanted) > 1 and all(
+            functions[which] is not generated.NEVER for which in wanted[1:])
+        every_one = all(functions[which] is not generated.NEVER for which in wanted)
+        self._model = self._model_tuple(functions, every_one)
+        # Compile (or load from numba's cache) and find the compiled functions outside the timed
+        # stepping: the generated steps' own loop where it can serve (every function the
+        # formulation calls generated, a one-step method without partitioning), else the full
+        # loop; the full loop behind the generated steps only when they hand a step over
+        # (_full_entry).
+        self._entry = self._generated_entry = None
+        if every_one and not self._multistep and not self._partitioned:
+            self._generated_entry = on_demand.entry(
+                compiled.run_generated_samples, self._generated_args(self._full_args()),
+                "the generated steps' loop")
         else:
-            dispatcher = compiled.run_samples
-            if self._multistep:
-                dispatcher = (compiled_multistep.run_explicit_samples
-                              if method_class.beta[0] == 0.0
-                              else compiled_multistep.run_samples)
-            args = self._samples_args(np.zeros(0, np.int64))
-        dispatcher(*args)
-        self._entry = _compiled_entry(dispatcher, args)
+            self._full_entry()
+
+    def _full_loop(self, method_class):
+        """The numba dispatcher of the full compiled loop of this method and formulation."""
+        if self._partitioned:
+            return compiled.run_steps
+        if not self._multistep:
+            return compiled.run_samples
+        return (compiled_multistep.run_explicit_samples if method_class.beta[0] == 0.0
+                else compiled_multistep.run_samples)
+
+    def _model_tuple(self, functions: tuple, every_one: bool) -> tuple:
+        """The compiled loop's model (:data:`compiled.GAINS` …) with the generated
+        ``functions``; ``every_one``: every function the formulation calls generated."""
+        formulation = self.formulation
+        return (np.asarray(formulation.gains, dtype=float),
+                np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
+                formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
+                functions, every_one)
+
+    def _full_args(self) -> tuple:
+        """Arguments of the full loop from the start (types as every call's)."""
+        return (self._steps_args(0) if self._partitioned
+                else self._samples_args(np.zeros(0, np.int64)))
+
+    def _full_entry(self):
+        """The full loop's compiled function, compiled now (or loaded) if it is not yet: inside a
+        run, when the generated steps first hand a step over, that time is left out of the
+        run's wall time (:attr:`untimed_s`) and a note says so."""
+        if self._entry is None:
+            began = time.perf_counter()
+            self._entry = on_demand.entry(self._dispatcher, self._full_args(),
+                                          "the in-house kernels' loop")
+            if self._generated_entry is not None:
+                took = time.perf_counter() - began
+                self.untimed_s += took
+                self.notes.append(
+                    f"the generated steps handed step {self.steps + 1} over to the kernels' "
+                    f"loop, which was loaded or compiled then ({took:.3g} s, left out of the "
+                    f"wall time)")
+        return self._entry
 
     def _wanted_functions(self) -> list[int]:
         """The generated functions the loop calls for this formulation (:mod:`.generated`): the
@@ -235,7 +281,7 @@ class CompiledStepper(FormulationStepper):
 
     def _run(self, last: int):
         """:func:`compiled.run_steps` from the integrated state to step ``last``."""
-        return self._entry(*self._steps_args(last))
+        return self._full_entry()(*self._steps_args(last))
 
     def _step_to(self, t: float) -> None:
         target = self._step_of_time.get(t)
@@ -290,13 +336,31 @@ class CompiledStepper(FormulationStepper):
         """Integrate from the last integrated state through every step of ``targets`` in one
         call."""
         args = self._samples_args(targets)
-        q, v, done, status, reached = self._entry(*args)
         q_out, v_out = args[-2:]
+        if self._generated_entry is None:
+            q, v, done, status, reached = self._full_entry()(*args)
+        else:
+            q, v, done, status, reached = self._generated_entry(*self._generated_args(args))
+            if status == compiled.DECLINED:  # the full loop goes on from the step handed over
+                self.steps = done
+                q, v, done, status, more = self._full_entry()(
+                    q, v, *args[2:4], done, targets[reached:], *args[6:15], q_out[reached:],
+                    v_out[reached:])
+                reached += more
         from_start = (targets.size == self._sample_steps.size
                       and targets[0] == self._sample_steps[0])  # then the same steps
         rows = (self._rows_from_start if from_start
                 else dict(zip(targets.tolist(), range(targets.size))))
         return _Samples(rows, reached, q_out, v_out, (q, v, done, status))
+
+    @staticmethod
+    def _generated_args(args: tuple) -> tuple:
+        """Arguments of :func:`compiled.run_generated_samples` from those of
+        :func:`compiled.run_samples` (:meth:`_samples_args`)."""
+        (q, v, t0, dt, first, targets, tableau, model, code, projection, _, _, limit, passage,
+         counters, q_out, v_out) = args
+        return (q, v, t0, dt, first, targets, tableau, model[compiled.GENERATED], code,
+                projection, limit, passage, counters, q_out, v_out)
 
     def _fail_at_end(self, samples: _Samples) -> None:
         """Make the last good state of ``samples`` current and raise the failure that ended it."""
@@ -390,16 +454,6 @@ def step_end_note(kernel_ends: int, step_ends: int) -> str | None:
             f"{step_ends} steps ({100.0 * kernel_ends / step_ends:.3g} %) to the kernels: a "
             f"certificate of their solve failed (near a singular position the kernels solve by "
             f"the truncated SVD, which cannot be generated)")
-
-
-def _compiled_entry(dispatcher, args: tuple):
-    """The compiled function of numba ``dispatcher`` for the types of ``args`` (compiled or loaded
-    already), called with its arguments converted but not typed: the dispatcher types every call's
-    arguments to choose a compilation, ~0.3 ms for the model tuple (its generated functions have
-    no fast type fingerprint, so numba types the whole tuple in Python), more than a pendulum's
-    run of 1000 steps.  Every later call must pass arguments of the same types, as the stepper
-    does: its arrays are C-contiguous float64 or int64 by construction."""
-    return dispatcher.overloads[tuple(dispatcher.typeof_pyval(arg) for arg in args)].entry_point
 
 
 @dataclass(frozen=True)

@@ -4,18 +4,14 @@ certifies, no answer where it cannot, and the right accelerations on redundant m
 
 from __future__ import annotations
 
-import math
-import tomllib
-
 import numpy as np
 import pytest
 
-import mbh
 from adapters.inhouse.kinematics import assemble
 from adapters.inhouse.linalg import NULL_LEVEL, certified_solve, semidefinite_solve, truncated_solve
 from adapters.inhouse.stabilisation import NoStabilisation
 from harness.model import scenario
-from harness.model.scenario import SCENARIO_DIR
+from tests.helpers import parallel_revolute_fourbar
 
 
 def _semidefinite(kept_values, deficiency, seed):
@@ -72,25 +68,6 @@ def test_a_kept_direction_close_to_the_cut_is_left_to_the_svd():
     assert not certified and x.size == 0
 
 
-def _parallel_revolute_fourbar():
-    """The seed four-bar's file drawn in space with four revolutes about z: three redundant
-    equations (the two tilts of two joints)."""
-    fourbar = tomllib.loads((SCENARIO_DIR / "fourbar.toml").read_text(encoding="utf-8"))
-    builder = mbh.MechanismBuilder("fourbar_4r", kind="spatial", duration=1.0,
-                                   gravity=fourbar["gravity"])
-    for body in fourbar["bodies"]:
-        half = math.radians(body["angle_deg"]) / 2.0
-        builder = builder.body(body["name"], mass=body["mass"], inertia=body["inertia"],
-                               position=body["position"],
-                               quaternion=[math.cos(half), 0.0, 0.0, math.sin(half)])
-    for joint in fourbar["joints"]:
-        builder = builder.joint(joint["name"], "revolute", body1=joint["body1"],
-                                body2=joint["body2"], location=joint["location"],
-                                axis=[0.0, 0.0, 1.0])
-    return (builder.initial(driver="O", value=0.0, rate=0.0)
-            .output("crank_angle", "joint_angle", joint="O").build())
-
-
 @pytest.mark.parametrize("name", ["bricard", "fourbar_4r"])
 def test_redundant_mechanisms_get_the_augmented_systems_accelerations(name):
     """At moving states of Bricard's mechanism (one redundant equation) and of a four-bar of
@@ -100,7 +77,7 @@ def test_redundant_mechanisms_get_the_augmented_systems_accelerations(name):
     (four-bar); with the truncated SVD in place of the pivoted solve 1.7e-13 and 1.5e-11 (the
     augmented system's own round-off, its masses 78–156 kg against Φ_q's entries ~1); bound
     2e-10."""
-    mech = _parallel_revolute_fourbar() if name == "fourbar_4r" else scenario.load(name)
+    mech = parallel_revolute_fourbar() if name == "fourbar_4r" else scenario.load(name)
     for value, rate in ((0.3, 1.0), (0.9, -2.0), (3.0, 0.5)):
         assembly = assemble(mech, value=value, rate=rate)
         q, v = assembly.q, assembly.v

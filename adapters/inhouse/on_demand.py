@@ -1,0 +1,76 @@
+"""The compiled loops, made when a run first needs them: once per machine and code, by one
+process while the others wait (:mod:`harness.common.file_lock`), and announced when that takes
+long (:mod:`harness.common.waits`).
+
+numba compiles a function at its first call for the argument types of that call, or loads it
+from its cache (:mod:`harness.common.kernel_cache`).  The stepper asks here instead: for the
+compiled function of a loop (:func:`entry`), and beforehand whether that loop is ready on this
+machine (:func:`is_ready`), so that a run can take a path that compiles in seconds (the generated
+steps alone) rather than wait a minute or more for the kernels' loop it may never need
+(docs/speed.md, "What a first run compiles").
+"""
+
+from __future__ import annotations
+
+import hashlib
+
+from harness.common import file_lock, waits
+from harness.common.kernel_cache import kernel_folder
+
+#: Measured first compilations, s, of the loops a stepper asks for (2-core machine, one process,
+#: 2026-11-29, ``benchmarks/compile_cost.py``): what the announcement says to expect.
+ESTIMATES_S = {"run_samples": 190.0, "run_steps": 190.0, "run_generated_samples": 3.0}
+#: The estimate of a loop not in :data:`ESTIMATES_S`, s.
+DEFAULT_ESTIMATE_S = 120.0
+
+
+def _types(dispatcher, args: tuple) -> tuple:
+    return tuple(dispatcher.typeof_pyval(arg) for arg in args)
+
+
+def _marker(dispatcher, types: tuple):
+    """The file saying that ``dispatcher`` was compiled for ``types`` with this code on this
+    machine (in :func:`kernel_folder`, so a change of the kernels starts without it)."""
+    digest = hashlib.sha256(repr(types).encode()).hexdigest()[:16]
+    return kernel_folder() / "ready" / f"{dispatcher.py_func.__name__}-{digest}"
+
+
+def is_ready(dispatcher, args: tuple) -> bool:
+    """Whether ``dispatcher`` for the types of ``args`` is compiled in this process or was
+    compiled into the cache by any process with this code: a call would not compile it."""
+    types = _types(dispatcher, args)
+    return types in dispatcher.overloads or _marker(dispatcher, types).exists()
+
+
+def entry(dispatcher, args: tuple, what: str):
+    """The compiled function of ``dispatcher`` for the types of ``args``, called without the
+    dispatcher's typing of every call (~0.3 ms for the stepper's model tuple, whose generated
+    functions numba types in Python): every later call must pass arguments of the same types.
+
+    Compiled, or loaded from numba's cache, now if needed: under the lock of its cache, so that
+    a second process waits for the first and then loads; a compilation is announced as ``what``
+    with its :data:`ESTIMATES_S`.
+    """
+    types = _types(dispatcher, args)
+    overload = dispatcher.overloads.get(types)
+    if overload is None:
+        name = dispatcher.py_func.__name__
+        marker = _marker(dispatcher, types)
+        with file_lock.held(kernel_folder() / "locks" / f"{name}.lock"):
+            if marker.exists():
+                dispatcher.compile(types)
+            else:
+                with waits.said(f"compiling {what}", "once on this machine",
+                                ESTIMATES_S.get(name, DEFAULT_ESTIMATE_S)):
+                    dispatcher.compile(types)
+                _mark(marker)
+        overload = dispatcher.overloads[types]
+    return overload.entry_point
+
+
+def _mark(marker) -> None:
+    try:
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    except OSError:  # an unwritable cache only loses the mark: the next run asks numba again
+        pass
