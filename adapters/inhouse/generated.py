@@ -42,6 +42,7 @@ from numba import cfunc, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
 from adapters.inhouse import banded, bodykin, dynamics, generated_store, kernels, linalg, tracing
+from harness.common import waits
 from harness.common.kernel_cache import kernel_fingerprint
 
 # The compiled loop takes the generated functions as first-class function values, a numba
@@ -54,6 +55,8 @@ warnings.filterwarnings("ignore", message="First-class function type feature is 
 SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64,
                         types.float64[::1])
 
+#: Generated source lines numba compiles a second, about (the announcement's estimate).
+LINES_PER_SECOND = 1000
 #: Traces with more operations are not compiled (the kernel runs instead): numba compiles
 #: ~1,000 straight-line operations a second, so a mechanism of tens of bodies would wait minutes.
 MAX_OPERATIONS = 20_000
@@ -92,6 +95,8 @@ class NotTraceable(NotGenerated):
 #:   (:func:`~adapters.inhouse.banded.min_norm_correction_and_indicator`);
 #: * INDICATOR — ρ̂ alone, out[0] (:func:`~adapters.inhouse.banded.conditioning_indicator`).
 ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR = range(5)
+#: The line that makes a generated source's function a compiled ``cfunc``.
+_DECORATOR = "@cfunc(SIGNATURE, cache=True)\n"
 _NAMES = ("acceleration", "residual_size", "position_correction", "velocity_correction",
           "indicator")
 
@@ -123,6 +128,29 @@ def kernel_outputs(which: int, formulation, q, v, t) -> list:
     return [banded.conditioning_indicator(jacobian, sparsity_arrays)]
 
 
+def traced_state(q0: np.ndarray, v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The state the functions are traced at (see the module notes): the start (q0, v0) with its
+    coordinates moved by ~1e-6 and its velocities by ~1 in a fixed pseudo-random direction."""
+    rng = np.random.default_rng(20261126)
+    return q0 + 1e-6 * rng.standard_normal(q0.size), v0 + rng.standard_normal(v0.size)
+
+
+def declines_at_start(which: int, source: str, q0: np.ndarray, v0: np.ndarray) -> bool:
+    """Whether generated function ``which`` of module ``source`` declines a call at the start's
+    coordinates q0 (with the traced velocities, so that no velocity is zero by the start alone),
+    run as plain Python before anything is compiled.  The traced state lies ~1e-6 off the
+    constraints, the start on them: where that decides a guard (a pivot of a range-space solve
+    that is zero on the constraints, as where equations are redundant), the function would hand
+    back nearly every call of a run, and compiling it would cost seconds to minutes for
+    nothing."""
+    namespace: dict = {}
+    exec(compile(source.replace(_DECORATOR, ""), f"<generated {_NAMES[which]}>", "exec"),
+         namespace)
+    out = np.zeros(2 * q0.size + 2)
+    return namespace[_NAMES[which]](np.array(q0, dtype=float), traced_state(q0, v0)[1], 0.0,
+                                    out) == 0
+
+
 def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> str:
     """The Python source of generated function ``which`` (:data:`ACCELERATION` …) of
     ``formulation`` (its rows, gains α, β, projection cut, constraint and dynamics tables), traced
@@ -133,9 +161,7 @@ def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> 
     NotGenerated
         When the trace passes :data:`MAX_OPERATIONS` or meets a branch it cannot follow.
     """
-    rng = np.random.default_rng(20261126)
-    q = q0 + 1e-6 * rng.standard_normal(q0.size)
-    v = v0 + rng.standard_normal(v0.size)
+    q, v = traced_state(q0, v0)
     graph = tracing.Graph(limit=MAX_OPERATIONS)
     name = _NAMES[which]
     try:
@@ -211,7 +237,7 @@ def _traced_source(key: str | None, which: int, formulation, q0: np.ndarray,
               "# delete freely (it is made again when needed).\n"
               "import numpy as np\nfrom numba import cfunc\n\n"
               "from adapters.inhouse.generated import SIGNATURE\n\n\n"
-              "@cfunc(SIGNATURE, cache=True)\n" + body)
+              + _DECORATOR + body)
     if key:
         generated_store.remember(key, {"module": module_name(source)})
     return source
@@ -244,16 +270,28 @@ def compiled_function(which: int, formulation, q0: np.ndarray, v0: np.ndarray,
             name = module_name(source)
             module = sys.modules.get(name)
         if module is None:
-            module = _load(name, source, compile_new)
+            if not generated_store.is_compiled(name) and declines_at_start(which, source, q0,
+                                                                            v0):
+                reason = ("its guards decline at the start, where a pivot of its solves "
+                          "differs from the traced state's (as where equations are redundant): "
+                          "it would hand back nearly every call, so it is not compiled")
+                if key:
+                    generated_store.remember(key, {"not_generated": reason})
+                raise NotGenerated(reason)
+            module = _load(name, source, compile_new, which)
     return getattr(module, _NAMES[which])
 
 
-def _load(name: str, source: str, compile_new: bool):
-    """Module ``name`` of ``source`` from the store (:func:`generated_store.load`)."""
+def _load(name: str, source: str, compile_new: bool, which: int):
+    """Module ``name`` of ``source`` from the store (:func:`generated_store.load`); a compilation
+    is announced (:mod:`harness.common.waits`) with its estimate (:data:`LINES_PER_SECOND`)."""
     if not compile_new and not generated_store.is_compiled(name):
         raise NotCompiled("not compiled yet")
+    lines = source.count("\n")
     try:
-        return generated_store.load(name, source)
+        return generated_store.load(name, source, announce=waits.said(
+            f"compiling the generated {_NAMES[which].replace('_', ' ')} of this mechanism "
+            f"({lines} lines)", "once on this machine", max(1.0, lines / LINES_PER_SECOND)))
     except generated_store.GeneratedCacheSettingError:
         raise
     except Exception as error:  # noqa: BLE001 — a generator fault must not end the run

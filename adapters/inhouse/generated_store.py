@@ -8,6 +8,7 @@ Layout, under :func:`harness.common.locations.generated_cache` (``$MBH_GENERATED
     <toolchain>/<name>/__pycache__/  numba's cache of its compiled function (placed there by
                                      harness.common.kernel_cache), and the source's bytecode
     <toolchain>/<name>/used          present once compiled; modified at every load (last use)
+    <toolchain>/<name>/lock          held by the process that compiles or loads the entry
     <toolchain>/<key>.trace          a remembered trace (:func:`remember`): which entry, or why
                                      none, the trace of inputs with digest <key> gave; modified
                                      at every read (last use)
@@ -28,6 +29,7 @@ The source's text depends on the kernels it was traced from, so a kernel change 
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import json
 import math
@@ -38,6 +40,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+from harness.common import file_lock
 from harness.common.errors import MbhError
 from harness.common.kernel_cache import fingerprint
 from harness.common.locations import generated_cache
@@ -51,6 +54,8 @@ MAX_MB_ENV = "MBH_GENERATED_MAX_MB"
 DEFAULT_MAX_MB = 500
 #: The file marking an entry compiled; its modification time is the entry's last use.
 USED = "used"
+#: The lock file of an entry, held while it is compiled or loaded.
+LOCK = "lock"
 
 
 class GeneratedCacheSettingError(MbhError, ValueError):
@@ -121,10 +126,13 @@ def remember(key: str, value: dict) -> None:
         pass
 
 
-def load(name: str, source: str) -> ModuleType:
+def load(name: str, source: str, announce=None) -> ModuleType:
     """Module ``name`` of ``source`` (registered in :data:`sys.modules`, where numba's cache looks
     it up), its functions compiled or loaded from numba's cache.  A damaged entry is rebuilt; the
     entry is marked used, and after a new compilation the folder is bounded (:func:`evict`).
+    One process compiles an entry while others that want it wait (:mod:`harness.common.file_lock`
+    on the entry's :data:`LOCK`), then load it; ``announce``, a context manager, is entered around
+    a compilation (an entry not marked :data:`USED`).
 
     Raises
     ------
@@ -135,6 +143,23 @@ def load(name: str, source: str) -> ModuleType:
     """
     limit = max_bytes()  # a bad setting is reported before anything is compiled
     entry = entry_folder(name)
+    used = entry / USED
+    with file_lock.held(entry / LOCK):
+        compiled_now = not used.exists()
+        with announce if compiled_now and announce is not None else contextlib.nullcontext():
+            module = _import_entry(name, entry, source)
+        try:
+            used.touch()
+        except OSError:  # removed meanwhile by another process's eviction: only the mark is lost
+            pass
+    if compiled_now:
+        evict(generated_cache(), limit)
+    return module
+
+
+def _import_entry(name: str, entry: Path, source: str) -> ModuleType:
+    """Write ``source`` into ``entry`` and import it as module ``name``, compiling its function or
+    loading it from numba's cache; a damaged cache is removed and the import tried once more."""
     path = entry / f"{name}.py"
     _write_whole(path, source.encode())
     try:
@@ -146,14 +171,6 @@ def load(name: str, source: str) -> ModuleType:
         shutil.rmtree(numba_cache, ignore_errors=True)
         module = _import(name, path)
     _keep_bytecode(path, source.encode())
-    used = entry / USED
-    compiled_now = not used.exists()
-    try:
-        used.touch()
-    except OSError:  # removed meanwhile by another process's eviction: only the mark is lost
-        pass
-    if compiled_now:
-        evict(generated_cache(), limit)
     return module
 
 

@@ -22,13 +22,14 @@ from numba import cfunc, njit
 
 from adapters import get_adapter
 from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import dynamics, generated, generated_store, tracing
+from adapters.inhouse import (compiled_stepper, dynamics, generated, generated_store,
+                              on_demand, tracing)
 from adapters.inhouse.compiled_stepper import hand_back_note, step_end_note
 from harness.model import scenario
 from harness.neutral.assembly import AssemblyError
 from harness.testing.strategies import aligned_mechanisms, mechanisms
 from harness.model.timegrid import sample_times
-from tests.helpers import LARGE_TRACES, PATH_BOUND
+from tests.helpers import LARGE_TRACES, PATH_BOUND, parallel_revolute_fourbar
 
 RELATIVE_BOUND = 1e-13
 
@@ -167,6 +168,9 @@ def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypa
     def run(t_end):
         return adapter.simulate(mech, method, 1e-3, t_end, sample_times(1e-3, t_end, 0.1))
 
+    # The kernels' loop compiled first: else a short run compiles the generated functions, the
+    # cheaper of the two (test_a_short_run_where_the_kernels_loop_is_not_compiled_...).
+    adapter.simulate(mech, "rk4+baumgarte:loop=compiled", 1e-3, 1e-3, np.zeros(1))
     first = run(0.1)
     assert first.counters["kernel_calls"] == first.counters["rhs_evals"] == 400
     # (ρ̂'s function does not depend on the gains: another test may have compiled it already.)
@@ -181,6 +185,88 @@ def test_a_short_run_compiles_nothing_new_and_a_long_one_does(tmp_path, monkeypa
     # Two paths to the same numbers (measured equal to the bit): bounded as tests/
     # test_compiled_path.py bounds its paths, not by one machine's bits.
     assert np.abs(again.position - first.position).max() <= PATH_BOUND
+
+
+def test_a_short_run_where_the_kernels_loop_is_not_compiled_compiles_the_generated_functions(
+        tmp_path, monkeypatch):
+    """On a machine where the kernels' loop was never compiled (a minute or more), a short run
+    compiles the generated functions (seconds) and runs on them alone."""
+    monkeypatch.setenv("MBH_GENERATED_DIR", str(tmp_path))
+    monkeypatch.setattr(on_demand, "is_ready", lambda dispatcher, args: False)
+    run = get_adapter("inhouse").simulate(scenario.load("fourbar"),
+                                          "rk4+baumgarte:alpha=6,beta=6", 1e-3, 0.05,
+                                          sample_times(1e-3, 0.05))
+    assert run.status == "ok" and run.counters["kernel_calls"] == 0 < run.counters["rhs_evals"]
+    assert list(tmp_path.glob(f"*/*/{generated_store.USED}"))
+
+
+def _asked_loops(monkeypatch) -> list[str]:
+    """The names of the compiled loops the stepper asks :func:`on_demand.entry` for, in order."""
+    asked = []
+    entry = on_demand.entry
+
+    def recording(dispatcher, args, what):
+        asked.append(dispatcher.py_func.__name__)
+        return entry(dispatcher, args, what)
+
+    monkeypatch.setattr(compiled_stepper.on_demand, "entry", recording)
+    return asked
+
+
+def test_a_run_the_generated_steps_serve_never_asks_for_the_kernels_loop(monkeypatch):
+    """rk4+direct on the four-bar: every step on the generated functions, so the run asks for the
+    generated steps' loop alone, and the kernels' loop, a minute or more of compiling on a new
+    machine, is never made."""
+    asked = _asked_loops(monkeypatch)
+    run = get_adapter("inhouse").simulate(scenario.load("fourbar"), "rk4+direct:loop=generated",
+                                          1e-3, 0.2, sample_times(1e-3, 0.2))
+    assert run.status == "ok" and run.counters["kernel_calls"] == 0
+    assert asked == ["run_generated_samples"]
+
+
+def test_a_run_the_generated_steps_hand_over_is_the_full_loops_run_to_the_bit(monkeypatch):
+    """The double four-bar with rk4+baumgarte: the generated steps hand the run over to the full
+    loop at its first placed passage (~0.7 s), which then goes on to the end.  The states and
+    counters are those of the full loop run from the start (which runs the same generated steps
+    inside it), to the bit: the hand-over repeats no operation and skips none."""
+    mech, adapter = scenario.load("double_fourbar"), get_adapter("inhouse")
+    method, times = "rk4+baumgarte:loop=generated", sample_times(1e-2, 1.5)
+    asked = _asked_loops(monkeypatch)
+    handed = adapter.simulate(mech, method, 1e-2, 1.5, times)
+    assert asked == ["run_generated_samples", "run_samples"]
+    assert any("handed step" in note for note in handed.notes), handed.notes
+    init = compiled_stepper.CompiledStepper.__init__
+
+    def full_loop_only(self, *args, **kwargs):
+        init(self, *args, **kwargs)
+        if self._generated_entry is not None:
+            self._generated_entry = None
+            self._full_entry()
+
+    monkeypatch.setattr(compiled_stepper.CompiledStepper, "__init__", full_loop_only)
+    whole = adapter.simulate(mech, method, 1e-2, 1.5, times)
+    assert handed.status == whole.status == "ok"
+    assert handed.counters["passages"] > 0 and handed.counters == whole.counters
+    np.testing.assert_array_equal(handed.position, whole.position)
+    np.testing.assert_array_equal(handed.velocity, whole.velocity)
+
+
+def test_a_function_whose_guards_decline_at_the_start_is_not_compiled(tmp_path, monkeypatch):
+    """A four-bar drawn in space with four parallel revolutes (three redundant equations): ρ̂,
+    traced off the constraints, takes the plain Cholesky factorisation there, whose pivot is
+    zero on them, so the function would hand back every call (its right-hand side's trace passes
+    MAX_OPERATIONS: flat bodies take the augmented mass form).  ρ̂'s source is checked at the
+    start before anything is compiled, and the note says why the kernels serve it."""
+    monkeypatch.setenv("MBH_GENERATED_DIR", str(tmp_path))
+    run = get_adapter("inhouse").simulate(parallel_revolute_fourbar(),
+                                          "rk4+baumgarte:loop=generated", 1e-3, 0.05,
+                                          sample_times(1e-3, 0.05))
+    assert run.status == "ok" and run.counters["passages"] == 0
+    assert any(note.startswith("not generated: indicator (its guards decline at the start")
+               for note in run.notes), run.notes
+    compiled_sources = [path.read_text() for mark in tmp_path.glob(f"*/*/{generated_store.USED}")
+                        for path in mark.parent.glob("*.py")]
+    assert not [text for text in compiled_sources if "def indicator(" in text]
 
 
 @settings(max_examples=5, derandomize=True, deadline=None, database=None,
