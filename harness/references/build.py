@@ -40,13 +40,15 @@ within the limit, arrays on the grid), or the reference is rebuilt; files are wr
 
 A build takes seconds to minutes (docs/measurements.md, "References").  On a terminal it shows a
 progress bar with the time left (:class:`~harness.common.progress.StageProgress`), estimated from
-a pilot run of each stage over the first :data:`PILOT_FRACTION` of the duration; elsewhere it is
-quiet and runs no pilot.
+a pilot run of each stage over the first :data:`PILOT_FRACTION` of the duration.  Each stage is
+also said on the ``mbh`` logger (:mod:`harness.common.waits`: the command line's stderr lines),
+with the time left; where neither bar nor lines are shown, no pilot runs.
 """
 
 from __future__ import annotations
 
 import json
+import logging
 import time
 
 import numpy as np
@@ -57,6 +59,7 @@ from harness.model.outputs import output_series
 from harness.model.timegrid import GRID_STEP
 from harness.model.trajectory import Trajectory
 from harness.common.errors import MbhError
+from harness.common import waits
 from harness.common.progress import StageProgress, progress_wanted
 from harness.store.reference_files import (AGREEMENT_LIMIT, REFERENCE_VERSION, cache_dir,
                                            read_reference, reference_grid, refusal_path,
@@ -168,10 +171,18 @@ def build_reference(mech: Mechanism, show_progress: bool | None = None) -> tuple
     first, second = routes(mech)
     stages = [first, second] + ([] if mech.branch else [DAE_CHECK])
     shown = progress_wanted(True) if show_progress is None else show_progress
-    estimates = [_estimate(mech, route, grid) for route in stages] if shown else [0.0] * len(stages)
+    said = shown or waits.LOG.isEnabledFor(logging.INFO)
+    estimates = [_estimate(mech, route, grid) for route in stages] if said else [0.0] * len(stages)
     with StageProgress(f"reference {mech.name}", estimates, shown) as bar:
-        route_a = bar.run(0, f"route A {first[0]}", lambda: _run_route(mech, first, grid))
-        route_b = bar.run(1, f"route B {second[0]}", lambda: _run_route(mech, second, grid))
+        def stage(index: int, name: str, work):
+            left = sum(estimates[index:])
+            waits.LOG.info("reference of %s: stage %d of %d, %s%s", mech.name, index + 1,
+                           len(stages), name,
+                           f" (~{waits.duration(left)} left)" if left > 0 else "")
+            return bar.run(index, name, work)
+
+        route_a = stage(0, f"route A {first[0]}", lambda: _run_route(mech, first, grid))
+        route_b = stage(1, f"route B {second[0]}", lambda: _run_route(mech, second, grid))
         agreement = route_difference(mech, route_a, route_b)
         if agreement["max"] > AGREEMENT_LIMIT:
             raise ReferenceBuildError(f"{mech.name}: reference routes disagree by "
@@ -181,7 +192,7 @@ def build_reference(mech: Mechanism, show_progress: bool | None = None) -> tuple
         if not joints <= AGREEMENT_LIMIT:
             raise ReferenceBuildError(f"{mech.name}: route A violates the joint equations by "
                                       f"{joints:.3g} m > {AGREEMENT_LIMIT:g}")
-        dae = (bar.run(2, "DAE check", lambda: _dae_check(mech, route_a, grid))
+        dae = (stage(2, "DAE check", lambda: _dae_check(mech, route_a, grid))
                if not mech.branch else None)
     info = {"scenario": mech.name, "content_hash": mech.content_hash,
             "version": REFERENCE_VERSION, "route_a": list(first), "route_b": list(second),
@@ -226,7 +237,9 @@ def load_or_build(mech: Mechanism, show_progress: bool | None = None) -> tuple[T
         return cached
     _raise_recorded_refusal(mech)
     try:
-        trajectory, info = build_reference(mech, show_progress)
+        with waits.said(f"building the verified reference of {mech.name}",
+                        "once per scene and version: two routes must agree"):
+            trajectory, info = build_reference(mech, show_progress)
     except ReferenceBuildError as error:
         _record_refusal(mech, error)
         raise
