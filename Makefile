@@ -17,11 +17,13 @@ $(STAMP): pyproject.toml constraints.txt
 # `make report`: run the nightly campaign (`make report QUICK=1`: the smoke campaign), store the
 # seed's comparison table beside the run (seed_table.json), build the HTML and PDF reports into
 # reports/<run-id>/ against the previous run of the same campaign (if any), point reports/latest at
-# them (a copy where symlinks fail) and print the HTML file's path last.
+# them (a copy where symlinks fail) and print the HTML file's path last.  `mbh warm-up` first
+# compiles the in-house kernels and loops on every core (its lines go to stderr).
 REPORT_CAMPAIGN = $(if $(QUICK),smoke,nightly)
 SEED_REPEATS = $(if $(QUICK),1,3)
 
 report: $(STAMP)
+	@$(BIN)/mbh warm-up >&2
 	@set -e; \
 	ran=$$($(BIN)/mbh run $(REPORT_CAMPAIGN)); echo "$$ran"; \
 	run=$$(printf '%s\n' "$$ran" | sed -n 's/^run \([^:]*\):.*/\1/p'); \
@@ -35,14 +37,18 @@ report: $(STAMP)
 	echo "$(CURDIR)/reports/$$run/report.html"
 
 # The suites run on every core (pytest-xdist), a test file's tests on one worker (--dist loadfile:
-# module fixtures run once); TEST_WORKERS=1 runs them in one process.
+# module fixtures run once); TEST_WORKERS=1 runs them in one process.  `mbh warm-up` first
+# compiles the in-house kernels and loops on every core (minutes once per machine and version of
+# the kernels, seconds after), so the workers load them instead of compiling them in turn.
 TEST_WORKERS ?= auto
 XDIST = $(if $(filter 1,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadfile)
 
 test: $(STAMP)
+	$(BIN)/mbh warm-up
 	$(BIN)/python -m pytest $(XDIST)
 
 test-slow: $(STAMP)
+	$(BIN)/mbh warm-up
 	$(BIN)/python -m pytest -m slow $(XDIST)
 
 # `make lint`: Ruff with the rules of pyproject.toml ([tool.ruff]) over the whole repository.

@@ -13,8 +13,10 @@ the case's ``notes``, never on stdout (:mod:`harness.common.capture`).
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
+import time
 
 from harness.common import capture, jsonout, waits
 from harness.common.errors import MbhError
@@ -228,6 +230,26 @@ def cmd_reference(args) -> int:
     else:
         for key, value in result.items():
             print(f"{key:14s} {value}")
+    return 0
+
+
+def cmd_warm_up(args) -> int:
+    """Compile the in-house kernels and loops ahead of the first runs (harness.run.warm_up) and
+    say what each case compiled and how long it took; a failed case is listed, not fatal."""
+    from harness.run.warm_up import warm_up
+
+    began = time.perf_counter()
+    warmed = warm_up(args.jobs or len(os.sched_getaffinity(0)))
+    rows = [{"scenario": w.case.scene, "method": w.case.method, "compiles": w.case.what,
+             "wall_time_s": w.seconds, "problem": w.problem} for w in warmed]
+    if args.json:
+        _print_json(rows)
+        return 0
+    problems = [row for row in rows if row["problem"]]
+    print(f"warmed up: {len(rows)} cases in {time.perf_counter() - began:.0f} s"
+          f"{f', {len(problems)} failed' if problems else ''}")
+    for row in problems:
+        print(f"  {row['scenario']} {row['method']}: {row['problem']}")
     return 0
 
 
@@ -581,6 +603,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_reference)
+
+    p = sub.add_parser("warm-up", help="compile the in-house kernels and loops ahead of the "
+                       "first runs, on every core (minutes once per machine and version)")
+    p.add_argument("--jobs", type=_positive_int, default=None,
+                   help="processes (default: the cores)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
+    p.add_argument("--json", action="store_true", help=JSON_HELP)
+    p.set_defaults(func=cmd_warm_up)
 
     p = sub.add_parser("export", help="write the engine model an adapter generates (MJCF)")
     p.add_argument("name")

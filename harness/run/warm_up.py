@@ -1,0 +1,127 @@
+"""``mbh warm-up``: compile, ahead of the first runs on a machine, what the in-house
+formulation's runs compile on first use, on every core at once.
+
+The in-house kernels and loops are compiled by numba at their first use and cached per machine
+and code (docs/speed.md, "Caches"): a fresh machine, or a new version of the kernels, pays a few
+minutes once.  A test suite's workers or a campaign's cases would each meet that wait at a
+different place (one process compiles, the others wait on its lock,
+:mod:`adapters.inhouse.on_demand`); the warm-up pays it up front, with the cores in parallel,
+and says so.  ``make test`` and ``make report`` run it first: the measured choice between this and
+compiling at install time is in docs/speed.md, "What a first run compiles".
+
+The work is a list of tiny in-house cases, each of which compiles one part, in phases: a phase's
+cases run in parallel processes, and a phase starts once the previous one has ended, because its
+cases load what the previous one compiled (the kernels' right-hand side, a callee of every
+loop, takes about a minute alone).  The generated functions of the shipped scenes' ``default``
+and ``best`` fill the processes that would otherwise wait.  A case that fails is reported, not
+raised: the runs that need its part compile it themselves.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
+from dataclasses import dataclass
+
+from harness.common import waits
+
+#: (scene, method, dt s, t_end s, what it compiles) of each phase, longest first.
+PHASES = (
+    (("fourbar", "rk4+baumgarte:loop=python", 1e-3, 0.002,
+      "the kernels' right-hand side and the start's kernels"),),
+    (("fourbar", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "the one-step methods' loop"),
+     ("fourbar", "ida", 1e-3, 0.002, "the DAE solver's kernels")),
+    # These call the one-step loop's steps (the multistep methods' start, partitioning's stages).
+    (("fourbar", "bdf2+baumgarte:loop=compiled", 1e-3, 0.004, "the implicit multistep loop"),
+     ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop"),
+     ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop")),
+)
+#: Scenes whose ``default`` and ``best`` generated functions fill idle processes, at a run long
+#: enough for ``loop=auto`` to make them.
+FILL_SCENES = ("fourbar", "slider_crank_planar", "simple_pendulum", "fourbar_spatial",
+               "slider_crank", "double_fourbar", "parallelogram_fourbar", "stiff_fourbar",
+               "andrews")
+#: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md): the announcement.
+ESTIMATE_S = 180.0
+
+
+@dataclass(frozen=True)
+class WarmCase:
+    """One case of the warm-up and what it compiles."""
+
+    scene: str
+    method: str
+    dt: float
+    t_end: float
+    what: str
+
+    @property
+    def label(self) -> str:
+        return f"{self.scene} {self.method}"
+
+
+@dataclass(frozen=True)
+class Warmed:
+    """What one case of the warm-up did: its wall time (s) and, if it failed, why."""
+
+    case: WarmCase
+    seconds: float
+    problem: str = ""
+
+
+def _fill_cases() -> list[WarmCase]:
+    """The generated functions of :data:`FILL_SCENES`' default and best (``loop=generated``)."""
+    return [WarmCase(scene, f"{alias}:loop=generated", 1e-3, 0.002,
+                     f"{scene}'s generated functions ({alias})")
+            for scene in FILL_SCENES for alias in ("rk4+baumgarte", "rk4+direct")]
+
+
+def _run(case: WarmCase) -> Warmed:
+    """Run ``case`` in this process (a fresh interpreter of the pool)."""
+    began = time.perf_counter()
+    try:
+        import numpy as np
+
+        from adapters import get_adapter
+        from harness.model import scenario
+
+        trajectory = get_adapter("inhouse").simulate(scenario.load(case.scene), case.method,
+                                                     case.dt, case.t_end, np.zeros(1))
+        problem = "" if trajectory.status == "ok" else f"{trajectory.status}: {trajectory.reason}"
+    except Exception as error:  # noqa: BLE001 — a failed warm-up case only costs a later wait
+        problem = f"{type(error).__name__}: {error}"
+    return Warmed(case, time.perf_counter() - began, problem)
+
+
+def warm_up(jobs: int) -> list[Warmed]:
+    """Run :data:`PHASES` on ``jobs`` processes, the fill cases in the processes a phase leaves
+    idle; every case's :class:`Warmed`, in the order they ended."""
+    fill = _fill_cases()
+    done: list[Warmed] = []
+
+    def record(future) -> None:
+        warmed = future.result()
+        done.append(warmed)
+        waits.LOG.info("warm-up: %s (%s) %.0f s%s", warmed.case.label, warmed.case.what,
+                       warmed.seconds, f": {warmed.problem}" if warmed.problem else "")
+
+    context = multiprocessing.get_context("spawn")  # fresh interpreters: nothing inherited
+    with waits.said(f"compiling the in-house kernels and loops on {jobs} process(es)",
+                    "once per machine and version of the kernels", ESTIMATE_S), \
+            ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        running: set = set()
+        for phase in PHASES:
+            own = {pool.submit(_run, WarmCase(*case)) for case in phase}
+            running |= own
+            while own:
+                while len(running) < jobs and fill:
+                    running.add(pool.submit(_run, fill.pop(0)))
+                finished, running = wait(running, return_when=FIRST_COMPLETED)
+                for future in finished:
+                    record(future)
+                own -= finished
+        running |= {pool.submit(_run, case) for case in fill}
+        for future in as_completed(running):
+            record(future)
+    return done
