@@ -47,9 +47,10 @@ def entry(dispatcher, args: tuple, what: str):
     dispatcher's typing of every call (~0.3 ms for the stepper's model tuple, whose generated
     functions numba types in Python): every later call must pass arguments of the same types.
 
-    Compiled, or loaded from numba's cache, now if needed: under the lock of its cache, so that
-    a second process waits for the first and then loads; a compilation is announced as ``what``
-    with its :data:`ESTIMATES_S`.
+    Compiled, or loaded from numba's cache, now if needed; a compilation is announced as
+    ``what`` with its :data:`ESTIMATES_S`.  A second process that wants the same loop meanwhile
+    waits for the first (the loop's lock here, so that it does not announce a compilation it will
+    not make; the kernels' own locks, :mod:`harness.common.kernel_cache`) and then loads it.
     """
     types = _types(dispatcher, args)
     overload = dispatcher.overloads.get(types)

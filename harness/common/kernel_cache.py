@@ -15,6 +15,11 @@ puts :class:`KernelCacheLocator` first among numba's cache locators, which place
 * the cache of a generated function (under :func:`harness.common.locations.generated_cache`)
   beside its source, so that an entry of :mod:`adapters.inhouse.generated_store` is one folder.
 
+A kernel is compiled by one process at a time: a process that misses it in the cache takes the
+kernel's lock file (``locks/`` in the fingerprint folder, :mod:`harness.common.file_lock`) and
+looks again, so a second process waits for the first and loads what it saved instead of
+compiling it too (pytest-xdist's workers, a campaign's cases, two terminals).
+
 A compiled kernel calls and reads only the modules of :func:`kernel_sources` (besides numpy,
 scipy's LAPACK and numba itself); the test named there checks every global each kernel reads.
 A user's
@@ -41,8 +46,9 @@ from pathlib import Path
 
 import llvmlite
 import numba
-from numba.core import caching
+from numba.core import caching, event
 
+from harness.common import file_lock
 from harness.common.locations import generated_cache, user_cache
 
 _ROOT = Path(__file__).resolve().parents[2]
@@ -138,6 +144,9 @@ class KernelCacheLocator(caching.InTreeCacheLocator):
     def __init__(self, py_func, py_file):
         super().__init__(py_func, py_file)
         self._cache_path = str(cache_folder(Path(py_file)))
+        #: A kernel of KERNEL_PACKAGES (not a generated function): compiled under its lock.
+        self.kernel = any(Path(py_file).resolve().is_relative_to(package)
+                          for package in KERNEL_PACKAGES)
 
     @classmethod
     def from_function(cls, py_func, py_file):
@@ -147,6 +156,75 @@ class KernelCacheLocator(caching.InTreeCacheLocator):
 
 
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among numba's cache locators (once per process)."""
+    """Put :class:`KernelCacheLocator` first among numba's cache locators, and lock the
+    compilation of the functions it places (:func:`_locking_load`), once per process."""
     if KernelCacheLocator not in caching.CacheImpl._locator_classes:
         caching.CacheImpl._locator_classes.insert(0, KernelCacheLocator)
+    if not getattr(caching.FunctionCache.load_overload, "_mbh_locking", False):
+        caching.FunctionCache.load_overload = _locking_load(caching.FunctionCache.load_overload)
+        caching.FunctionCache.save_overload = _unlocking_save(caching.FunctionCache.save_overload)
+        event.register("numba:compile", _FailedCompileListener())
+
+
+# -- one process compiles a function, the others wait and load it -----------------------------
+#
+# numba looks a function up in its cache (load_overload); on a miss it compiles it and saves it
+# (save_overload).  For the functions KernelCacheLocator places, a miss takes the function's lock
+# (harness.common.file_lock) and looks again: a process that waited finds what the holder saved
+# and loads it; else it keeps the lock while numba compiles, until the save (or a failed
+# compilation, _FailedCompileListener) releases it.  The call graph has no cycles, so two
+# processes taking a function's lock and then its callees' cannot wait for each other.
+
+#: Locks this process holds, by the cache (its id) whose miss took them.
+_COMPILING: dict[int, file_lock.Lock] = {}
+
+
+def _lock_path(cache) -> Path:
+    """The lock file of the function of ``cache`` (named as numba names its cache files: module,
+    qualified name, line), in :func:`kernel_folder`."""
+    return kernel_folder() / "locks" / f"{cache._impl.filename_base}.lock"
+
+
+def _locking_load(load):
+    def load_overload(self, sig, target_context):
+        data = load(self, sig, target_context)
+        locator = self._impl.locator
+        if data is not None or not getattr(locator, "kernel", False):
+            return data  # found, or not a kernel (generated entries lock themselves)
+        lock = file_lock.acquire(_lock_path(self))
+        if lock is None:
+            return None
+        data = load(self, sig, target_context)  # saved meanwhile by the process we waited for
+        if data is not None:
+            file_lock.release(lock)
+        else:
+            _COMPILING[id(self)] = lock
+        return data
+
+    load_overload._mbh_locking = True
+    return load_overload
+
+
+def _unlocking_save(save):
+    def save_overload(self, sig, data):
+        try:
+            save(self, sig, data)
+        finally:
+            file_lock.release(_COMPILING.pop(id(self), None))
+
+    return save_overload
+
+
+class _FailedCompileListener(event.Listener):
+    """Releases the lock of a function whose compilation raised (nothing is saved then)."""
+
+    def on_start(self, event_):
+        pass
+
+    def on_end(self, event_):
+        # numba 0.68's Event.is_failed is True for a compilation that succeeded (it tests the
+        # exception details for None, which they are then): read the details themselves.
+        details = getattr(event_, "_exc_details", None)
+        if details and details[0] is not None:
+            cache = getattr(event_.data["dispatcher"], "_cache", None)
+            file_lock.release(_COMPILING.pop(id(cache), None))
