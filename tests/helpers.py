@@ -179,3 +179,69 @@ def parallel_revolute_fourbar():
                                 axis=[0.0, 0.0, 1.0])
     return (builder.initial(driver="O", value=0.0, rate=0.0)
             .output("crank_angle", "joint_angle", joint="O").build())
+
+
+def bennett_linkage(crank_angle: float = 0.8, a: float = 1.0, b: float = 1.5,
+                    twist_deg: float = 30.0):
+    """Bennett's spatial 4R linkage (Bennett 1903; the overconstrained loop of mechanism
+    textbooks), typed from its description: four links of lengths a, b, a, b (m) with twists α,
+    β, α, β between neighbouring joint axes, a / sin α = b / sin β, no offsets; opposite joint
+    angles are opposite (θ₃ = −θ₁, θ₄ = −θ₂) and tan(θ₁/2) tan(θ₂/2) = sin((β + α)/2) /
+    sin((β − α)/2).  The fourth link is the ground, the other three 1 kg bodies at their links'
+    midpoints; gravity along −z; the first joint driven at 1 rad/s.  3 moving bodies, 4
+    revolutes: 3 redundant equations (Grübler's count gives −2, the mobility is 1)."""
+    alpha = math.radians(twist_deg)
+    beta = math.asin(b * math.sin(alpha) / a)
+    theta2 = 2.0 * math.atan(math.sin((beta + alpha) / 2.0) / math.sin((beta - alpha) / 2.0)
+                             / math.tan(crank_angle / 2.0))
+
+    def turned(axis, angle, vector):  # Rodrigues' rotation of ``vector`` about unit ``axis``
+        return (vector * math.cos(angle) + np.cross(axis, vector) * math.sin(angle)
+                + axis * (axis @ vector) * (1.0 - math.cos(angle)))
+
+    point, axis, normal = np.zeros(3), np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
+    points, axes = [], []
+    for k, angle in enumerate((crank_angle, theta2, -crank_angle, -theta2)):
+        points.append(point)
+        axes.append(axis)
+        normal = turned(axis, angle, normal)
+        point = point + (a if k % 2 == 0 else b) * normal
+        axis = turned(normal, alpha if k % 2 == 0 else beta, axis)
+    assert np.abs(point).max() < 1e-12 and np.abs(axis - axes[0]).max() < 1e-12  # closed
+    links = ("ground", "link1", "link2", "link3")
+    builder = mbh.MechanismBuilder("bennett", kind="spatial", duration=1.0,
+                                   gravity=[0.0, 0.0, -9.81])
+    for k in (1, 2, 3):
+        builder = builder.body(links[k], mass=1.0, inertia=[0.05, 0.05, 0.05],
+                               position=((points[k - 1] + points[k]) / 2.0).tolist(),
+                               quaternion=[1.0, 0.0, 0.0, 0.0])
+    for k in range(4):  # joint k between link k (ground for k = 0) and link k + 1 (mod 4)
+        builder = builder.joint(f"J{k + 1}", "revolute", body1=links[k],
+                                body2=links[(k + 1) % 4], location=points[k].tolist(),
+                                axis=axes[k].tolist())
+    return (builder.initial(driver="J1", value=0.0, rate=1.0)
+            .output("crank_angle", "joint_angle", joint="J1").build())
+
+
+def spring_damper_tree():
+    """A planar tree drawn by hand: a pendulum of two links from ground with a third link on the
+    first link's middle, a spring-damper from the second link's tip to ground and another
+    between the two branches; starts at rest with exact zeros (links along the axes)."""
+    builder = mbh.MechanismBuilder("spring_tree", kind="planar", plane="xy", duration=1.0,
+                                   gravity=[0.0, -9.81, 0.0])
+    for name, position, angle in (("upper", [0.5, 0.0, 0.0], 0.0),
+                                  ("lower", [1.0, -0.4, 0.0], -90.0),
+                                  ("side", [0.25, 0.3, 0.0], 90.0)):
+        builder = builder.body(name, mass=2.0, inertia=[0.01, 0.2, 0.2], position=position,
+                               angle_deg=angle)
+    builder = (builder.joint("O", "revolute", body1="ground", body2="upper", location=[0, 0, 0])
+               .joint("E", "revolute", body1="upper", body2="lower", location=[1.0, 0.0, 0.0])
+               .joint("M", "revolute", body1="upper", body2="side", location=[0.25, 0.0, 0.0])
+               .force("spring_damper", name="tip", body1="ground", body2="lower",
+                      location1=[1.5, -1.0, 0.0], location2=[1.0, -0.8, 0.0], stiffness=400.0,
+                      damping=2.0, free_length=0.3)
+               .force("spring_damper", name="between", body1="side", body2="lower",
+                      location1=[0.25, 0.6, 0.0], location2=[1.0, -0.8, 0.0], stiffness=50.0,
+                      damping=0.5, free_length=1.5))
+    return (builder.initial(driver="O", value=0.0, rate=0.0)
+            .output("upper_angle", "joint_angle", joint="O").build())
