@@ -52,6 +52,7 @@ from adapters.integrators import integrator_class
 from adapters.integrators.multistep import LinearMultistep
 from adapters.integrators.newton import non_convergence
 from adapters.integrators.nystrom import NystromIntegrator
+from harness.common import waits
 from harness.model.mechanism import Mechanism
 from harness.model.trajectory import BodyStates
 
@@ -207,7 +208,9 @@ class CompiledStepper(FormulationStepper):
     def _full_entry(self):
         """The full loop's compiled function, compiled now (or loaded) if it is not yet: inside a
         run, when the generated steps first hand a step over, that time is left out of the
-        run's wall time (:attr:`untimed_s`) and a note says so."""
+        run's wall time (:attr:`untimed_s`), as it was when the loop was always loaded before
+        the run, and a compilation (a wait that is said, :mod:`harness.common.waits`) is
+        noted."""
         if self._entry is None:
             began = time.perf_counter()
             self._entry = on_demand.entry(self._dispatcher, self._full_args(),
@@ -215,10 +218,10 @@ class CompiledStepper(FormulationStepper):
             if self._generated_entry is not None:
                 took = time.perf_counter() - began
                 self.untimed_s += took
-                self.notes.append(
-                    f"the generated steps handed step {self.steps + 1} over to the kernels' "
-                    f"loop, which was loaded or compiled then ({took:.3g} s, left out of the "
-                    f"wall time)")
+                if took >= waits.QUIET_BELOW_S:
+                    self.notes.append(
+                        f"the generated steps handed step {self.steps + 1} over to the kernels' "
+                        f"loop, compiled then ({took:.3g} s, left out of the wall time)")
         return self._entry
 
     def _wanted_functions(self) -> list[int]:

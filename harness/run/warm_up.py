@@ -13,7 +13,8 @@ The work is a list of tiny in-house cases, each of which compiles one part, in p
 cases run in parallel processes, and a phase starts once the previous one has ended, because its
 cases load what the previous one compiled (the kernels' right-hand side, a callee of every
 loop, takes about a minute alone).  The generated functions of the shipped scenes' ``default``
-and ``best`` fill the processes that would otherwise wait.  A case that fails is reported, not
+and ``best``, and the neutral reference routes of a scene that declares its branch, fill the
+processes that would otherwise wait.  A case that fails is reported, not
 raised: the runs that need its part compile it themselves.
 """
 
@@ -42,6 +43,11 @@ PHASES = (
 FILL_SCENES = ("fourbar", "slider_crank_planar", "simple_pendulum", "fourbar_spatial",
                "slider_crank", "double_fourbar", "parallelogram_fourbar", "stiff_fourbar",
                "andrews")
+#: Scenes whose neutral reference routes (harness/references/routes.py: kernels of
+#: harness/neutral) fill idle processes too: the routes of a scene that declares its branch.
+NEUTRAL_FILL_SCENES = ("double_fourbar",)
+#: The method name of a fill case that runs a scene's neutral reference routes.
+NEUTRAL_ROUTES = "neutral reference routes"
 #: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md): the announcement.
 ESTIMATE_S = 180.0
 
@@ -72,9 +78,11 @@ class Warmed:
 
 def _fill_cases() -> list[WarmCase]:
     """The generated functions of :data:`FILL_SCENES`' default and best (``loop=generated``)."""
-    return [WarmCase(scene, f"{alias}:loop=generated", 1e-3, 0.002,
-                     f"{scene}'s generated functions ({alias})")
-            for scene in FILL_SCENES for alias in ("rk4+baumgarte", "rk4+direct")]
+    return [WarmCase(scene, NEUTRAL_ROUTES, 1e-3, 0.002, "the neutral reference kernels")
+            for scene in NEUTRAL_FILL_SCENES] + [
+        WarmCase(scene, f"{alias}:loop=generated", 1e-3, 0.002,
+                 f"{scene}'s generated functions ({alias})")
+        for scene in FILL_SCENES for alias in ("rk4+baumgarte", "rk4+direct")]
 
 
 def _run(case: WarmCase) -> Warmed:
@@ -85,10 +93,16 @@ def _run(case: WarmCase) -> Warmed:
 
         from adapters import get_adapter
         from harness.model import scenario
+        from harness.references.routes import full_route, reduced_route
 
-        trajectory = get_adapter("inhouse").simulate(scenario.load(case.scene), case.method,
-                                                     case.dt, case.t_end, np.zeros(1))
-        problem = "" if trajectory.status == "ok" else f"{trajectory.status}: {trajectory.reason}"
+        mech = scenario.load(case.scene)
+        if case.method == NEUTRAL_ROUTES:
+            grid = np.array([0.0, case.t_end])
+            trajectories = [full_route(mech, grid), reduced_route(mech, grid)]
+        else:
+            trajectories = [get_adapter("inhouse").simulate(mech, case.method, case.dt,
+                                                            case.t_end, np.zeros(1))]
+        problem = "; ".join(f"{t.status}: {t.reason}" for t in trajectories if t.status != "ok")
     except Exception as error:  # noqa: BLE001 — a failed warm-up case only costs a later wait
         problem = f"{type(error).__name__}: {error}"
     return Warmed(case, time.perf_counter() - began, problem)

@@ -16,6 +16,7 @@ def test_every_case_runs_once_and_a_failure_is_a_row(monkeypatch, capsys):
         (("simple_pendulum", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "a kernels' loop"),),
     ))
     monkeypatch.setattr(warm_up, "FILL_SCENES", ("simple_pendulum",))
+    monkeypatch.setattr(warm_up, "NEUTRAL_FILL_SCENES", ())
     assert cli.main(["warm-up", "--jobs", "2", "--json", "--quiet"]) == 0
     rows = json.loads(capsys.readouterr().out)
     assert sorted((row["scenario"], row["method"]) for row in rows) == [
