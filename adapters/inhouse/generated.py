@@ -290,8 +290,8 @@ def _load(name: str, source: str, compile_new: bool, which: int):
     lines = source.count("\n")
     try:
         return generated_store.load(name, source, announce=waits.said(
-            f"compiling the generated {_NAMES[which].replace('_', ' ')} of this mechanism "
-            f"({lines} lines)", "once on this machine", max(1.0, lines / LINES_PER_SECOND)))
+            f"compiling the generated {_NAMES[which].replace('_', ' ')} of this mechanism, "
+            f"{lines} lines", "once on this machine", max(1.0, lines / LINES_PER_SECOND)))
     except generated_store.GeneratedCacheSettingError:
         raise
     except Exception as error:  # noqa: BLE001 — a generator fault must not end the run

@@ -12,6 +12,7 @@ steps alone) rather than wait a minute or more for the kernels' loop it may neve
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 
 from harness.common import file_lock, waits
@@ -67,6 +68,21 @@ def entry(dispatcher, args: tuple, what: str):
                 _mark(marker)
         overload = dispatcher.overloads[types]
     return overload.entry_point
+
+
+@contextlib.contextmanager
+def first_use(name: str, what: str, estimate_s: float):
+    """Announce the block as compiling ``what`` (:mod:`harness.common.waits`, with
+    ``estimate_s``) unless a block of this ``name`` ended well before with this code on this
+    machine: for the kernels called from Python (numba compiles each at its first call, so
+    there is no loop to ask for)."""
+    marker = kernel_folder() / "ready" / name
+    if marker.exists():
+        yield
+        return
+    with waits.said(f"compiling {what}", "once on this machine", estimate_s):
+        yield
+    _mark(marker)
 
 
 def _mark(marker) -> None:
