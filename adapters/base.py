@@ -271,15 +271,16 @@ class Stepper(abc.ABC):
     """
 
     source: str = ""
+    #: Seconds :meth:`_step_to` spent on one-time work that is not stepping (compiling a loop a
+    #: run needed only once it ran), left out of the run's wall time; a note should say so.  A
+    #: class attribute until a stepper adds to it, so a stepper that never does (and one that
+    #: does not call this ``__init__``) reads 0.
+    untimed_s: float = 0.0
 
     def __init__(self):
         self.steps = 0
         self.t_good: float | None = None
         self.notes: list[str] = []
-        #: Seconds :meth:`_step_to` spent on one-time work that is not stepping (compiling a
-        #: loop a run needed only once it ran), left out of the run's wall time; a note should
-        #: say so.
-        self.untimed_s = 0.0
 
     @abc.abstractmethod
     def _step_to(self, t: float) -> None:
@@ -344,7 +345,7 @@ class Stepper(abc.ABC):
         except Exception as error:  # noqa: BLE001 — a failure is a result (design rule 6)
             status, reason, failure_time = ("failed", blame(self.source, "the run", error),
                                             self._last_good(last_good))
-        wall -= getattr(self, "untimed_s", 0.0)
+        wall -= self.untimed_s
         run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
                    read_back_s=read_back, steps=self.steps, counters=self.counters(),
                    notes=list(self.notes))

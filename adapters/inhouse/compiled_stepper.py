@@ -163,10 +163,11 @@ class CompiledStepper(FormulationStepper):
                        or not on_demand.is_ready(self._dispatcher, self._full_args()))
         functions = (generated.NOTHING if loop == "compiled"
                      else self._generated_functions(wanted, compile_new))
-        self._accelerations_generated = functions[generated.ACCELERATION] is not generated.NEVER
-        #: Whether every function a step's end calls (the projection's parts, ρ̂) was generated.
-        self._step_ends_generated = len(wanted) > 1 and all(
-            functions[which] is not generated.NEVER for which in wanted[1:])
+        #: Whether the right-hand side was generated, and every function a step's end calls
+        #: (the projection's parts, ρ̂): their hand-backs are noted.
+        self._generated_parts = (functions[generated.ACCELERATION] is not generated.NEVER,
+                                 len(wanted) > 1 and all(functions[which] is not generated.NEVER
+                                                         for which in wanted[1:]))
         every_one = all(functions[which] is not generated.NEVER for which in wanted)
         self._model = self._model_tuple(functions, every_one)
         # Compile (or load from numba's cache) and find the compiled functions outside the timed
@@ -405,12 +406,11 @@ class CompiledStepper(FormulationStepper):
         (:func:`hand_back_note`, :func:`step_end_note`)."""
         trajectory = super().run(grid, n_bodies)
         counters = self._counters
+        accelerations, step_ends = self._generated_parts
         notes = [hand_back_note(int(counters[compiled.KERNEL_CALLS]),
-                                int(counters[compiled.RHS_EVALS]))
-                 if self._accelerations_generated else None,
+                                int(counters[compiled.RHS_EVALS])) if accelerations else None,
                  step_end_note(int(counters[compiled.STEP_END_KERNELS]),
-                               int(counters[compiled.STEP_ENDS]))
-                 if self._step_ends_generated else None]
+                               int(counters[compiled.STEP_ENDS])) if step_ends else None]
         trajectory.notes.extend(note for note in notes if note)
         return trajectory
 
