@@ -33,16 +33,17 @@ def show_on_stderr(quiet: bool = False) -> None:
     for handler in [h for h in LOG.handlers if getattr(h, "_mbh_stderr", False)]:
         LOG.removeHandler(handler)
         handler.close()
-        if handler.stream is not sys.stderr:
+        if handler._mbh_owned:  # the duplicate made below; never a stream someone else owns
             handler.stream.close()
     try:
         stream = os.fdopen(os.dup(sys.stderr.fileno()), "w", buffering=1,
                            encoding=sys.stderr.encoding or "utf-8", errors="backslashreplace")
-    except (AttributeError, OSError, ValueError):  # a stderr without a descriptor
-        stream = sys.stderr
+        owned = True
+    except (AttributeError, OSError, ValueError):  # a stderr without a descriptor (a capture)
+        stream, owned = sys.stderr, False
     handler = logging.StreamHandler(stream)
     handler.setFormatter(logging.Formatter("mbh: %(message)s"))
-    handler._mbh_stderr = True
+    handler._mbh_stderr, handler._mbh_owned = True, owned
     LOG.addHandler(handler)
     LOG.propagate = False
     LOG.setLevel(logging.WARNING if quiet else logging.INFO)
