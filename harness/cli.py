@@ -13,7 +13,6 @@ the case's ``notes``, never on stdout (:mod:`harness.common.capture`).
 from __future__ import annotations
 
 import argparse
-import os
 import signal
 import sys
 import time
@@ -236,10 +235,11 @@ def cmd_reference(args) -> int:
 def cmd_warm_up(args) -> int:
     """Compile the in-house kernels and loops ahead of the first runs (harness.run.warm_up) and
     say what each case compiled and how long it took; a failed case is listed, not fatal."""
+    from harness.run.executor import usable_cores
     from harness.run.warm_up import warm_up
 
     began = time.perf_counter()
-    warmed = warm_up(args.jobs or len(os.sched_getaffinity(0)))
+    warmed = warm_up(args.jobs or usable_cores())
     rows = [{"scenario": w.case.scene, "method": w.case.method, "compiles": w.case.what,
              "wall_time_s": w.seconds, "problem": w.problem} for w in warmed]
     if args.json:

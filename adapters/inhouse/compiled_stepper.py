@@ -179,7 +179,7 @@ class CompiledStepper(FormulationStepper):
         if every_one and not self._multistep and not self._partitioned:
             self._generated_entry = on_demand.entry(
                 compiled.run_generated_samples, self._generated_args(self._full_args()),
-                "the generated steps' loop")
+                "the generated steps' loop", on_demand.GENERATED_LOOP_S)
         else:
             self._full_entry()
 
@@ -215,7 +215,7 @@ class CompiledStepper(FormulationStepper):
         if self._entry is None:
             began = time.perf_counter()
             self._entry = on_demand.entry(self._dispatcher, self._full_args(),
-                                          "the in-house kernels' loop")
+                                          "the in-house kernels' loop", on_demand.FULL_LOOP_S)
             if self._generated_entry is not None:
                 took = time.perf_counter() - began
                 self.untimed_s += took
@@ -348,8 +348,7 @@ class CompiledStepper(FormulationStepper):
             if status == compiled.DECLINED:  # the full loop goes on from the step handed over
                 self.steps = done
                 q, v, done, status, more = self._full_entry()(
-                    q, v, *args[2:4], done, targets[reached:], *args[6:15], q_out[reached:],
-                    v_out[reached:])
+                    *self._continued_args(args, q, v, done, reached))
                 reached += more
         from_start = (targets.size == self._sample_steps.size
                       and targets[0] == self._sample_steps[0])  # then the same steps
@@ -365,6 +364,16 @@ class CompiledStepper(FormulationStepper):
          counters, q_out, v_out) = args
         return (q, v, t0, dt, first, targets, tableau, model[compiled.GENERATED], code,
                 projection, limit, passage, counters, q_out, v_out)
+
+    @staticmethod
+    def _continued_args(args: tuple, q: np.ndarray, v: np.ndarray, done: int,
+                        reached: int) -> tuple:
+        """Arguments of :func:`compiled.run_samples` (:meth:`_samples_args`) that go on from the
+        state (q, q̇) after step ``done`` through the targets of ``args`` from ``reached`` on,
+        into the same output rows."""
+        _, _, t0, dt, _, targets, *method_to_counters, q_out, v_out = args
+        return (q, v, t0, dt, done, targets[reached:], *method_to_counters, q_out[reached:],
+                v_out[reached:])
 
     def _fail_at_end(self, samples: _Samples) -> None:
         """Make the last good state of ``samples`` current and raise the failure that ended it."""

@@ -4,9 +4,10 @@ C libraries (SUNDIALS, Bullet, MuJoCo) write with ``printf``/``fprintf`` straigh
 descriptors 1 and 2, past Python's ``sys.stdout``, so ``contextlib.redirect_stdout`` does not
 catch them.  :func:`captured_output` points both descriptors at a temporary file for the duration
 of a block (``os.dup``/``os.dup2``), flushing Python's and C's stdio buffers on the way in and out
-so that nothing printed inside lands outside, and hands back the text.  :func:`answers_only_on_stdout`
-keeps a command's answer alone on stdout: what C code writes to descriptor 1 goes to stderr.  The redirection is
+so that nothing printed inside lands outside, and hands back the text.  The redirection is
 process-wide: do not run two captured blocks in threads of one process at once.
+:func:`answers_only_on_stdout` keeps a command's answer alone on stdout: what C code writes to
+descriptor 1 meanwhile goes to stderr.
 """
 
 from __future__ import annotations
