@@ -205,9 +205,9 @@ def _asked_loops(monkeypatch) -> list[str]:
     asked = []
     entry = on_demand.entry
 
-    def recording(dispatcher, args, what):
+    def recording(dispatcher, args, *announcement):
         asked.append(dispatcher.py_func.__name__)
-        return entry(dispatcher, args, what)
+        return entry(dispatcher, args, *announcement)
 
     monkeypatch.setattr(compiled_stepper.on_demand, "entry", recording)
     return asked
