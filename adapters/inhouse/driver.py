@@ -57,7 +57,9 @@ class FormulationStepper(Stepper):
         super().__init__()
         self.grid = grid
         self.layout = layout_of(mech)
-        with on_demand.first_use("start", "the kernels of the start and of the formulations "
+        # Per formulation: each calls its own kernels at its construction (ρ̂ only some).
+        with on_demand.first_use(f"start-{formulation_class.name}",
+                                 "the kernels of the start and of the formulations "
                                  "(Φ, Φ_q, γ, the rank, ρ̂)", START_COMPILE_S):
             assembly = common_start(mech)
             self._start_state = (assembly.q, assembly.v)
