@@ -19,8 +19,8 @@ import warnings
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 
-from adapters.base import Adapter, adapter_label, blame, describe
-from harness.common.errors import MbhError
+from mbh._adapters.base import Adapter, adapter_label, blame, describe
+from mbh._harness.common.errors import MbhError
 
 #: Entry-point group a third-party package declares its adapters in (value ``module:Class``).
 ENTRY_POINT_GROUP = "mbh.adapters"
@@ -28,11 +28,11 @@ ENTRY_POINT_GROUP = "mbh.adapters"
 BUILT_IN_ORIGIN = "built-in"
 #: The engines that ship with the harness: name → ``module:Class``.
 BUILT_IN = {
-    "inhouse": "adapters.inhouse.adapter:InhouseAdapter",
-    "mujoco": "adapters.mujoco_adapter:MujocoAdapter",
-    "pybullet": "adapters.pybullet_adapter:PybulletAdapter",
-    "pinocchio": "adapters.pinocchio_adapter:PinocchioAdapter",
-    "exudyn": "adapters.exudyn_adapter:ExudynAdapter",
+    "inhouse": "mbh._adapters.inhouse.adapter:InhouseAdapter",
+    "mujoco": "mbh._adapters.mujoco_adapter:MujocoAdapter",
+    "pybullet": "mbh._adapters.pybullet_adapter:PybulletAdapter",
+    "pinocchio": "mbh._adapters.pinocchio_adapter:PinocchioAdapter",
+    "exudyn": "mbh._adapters.exudyn_adapter:ExudynAdapter",
 }
 
 
@@ -42,7 +42,7 @@ class UnknownAdapterError(MbhError, ValueError):
 
 class AdapterLoadError(MbhError, ImportError):
     """A registered adapter cannot be loaded (its module fails to import, its class is missing, is
-    not an :class:`~adapters.base.Adapter` or fails to construct); the message names the adapter,
+    not an :class:`~mbh._adapters.base.Adapter` or fails to construct); the message names the adapter,
     the package that provides it and the error."""
 
 
@@ -152,7 +152,7 @@ def get_adapter(name: str) -> Adapter:
     try:
         cls = getattr(importlib.import_module(module_name), class_name)
         if not (isinstance(cls, type) and issubclass(cls, Adapter)):
-            raise TypeError(f"{found.target} is not a subclass of adapters.base.Adapter")
+            raise TypeError(f"{found.target} is not a subclass of mbh._adapters.base.Adapter")
         adapter = cls()
     except Exception as error:  # noqa: BLE001 — any failure of third-party code is named
         raise AdapterLoadError(f"{found.label} cannot be loaded ({found.target}): "

@@ -1,7 +1,7 @@
 """The adapter contract every engine implements, the in-house formulation included.
 
 ``build(mechanism)`` → engine model; ``simulate(model, method, dt, t_end, sample_times)`` →
-:class:`~harness.model.trajectory.Trajectory`; ``methods()`` lists the engine's methods with their
+:class:`~mbh._harness.model.trajectory.Trajectory`; ``methods()`` lists the engine's methods with their
 parameters; ``version()`` names the engine version.  Method names are user-facing strings
 ``NAME[:key=value,...]`` parsed by :func:`parse_method`.
 
@@ -11,7 +11,7 @@ One run loop
 the times with one rule (:func:`check_run_times`), asks the adapter for an engine-specific
 :class:`Stepper` (``Adapter._start``), steps it through every sample time and on to ``t_end``,
 checks every state it reads (:func:`divergence_reason`) and turns every way a run can end into a
-status (the classification is in :mod:`harness.model.trajectory`):
+status (the classification is in :mod:`mbh._harness.model.trajectory`):
 
 * ``ok``: every state read was finite and within :data:`DIVERGENCE_LIMIT`;
 * ``diverged``: a state read was non-finite or beyond the limit, or the engine's own divergence
@@ -22,7 +22,7 @@ status (the classification is in :mod:`harness.model.trajectory`):
 * ``unsupported``: ``_start`` raised :class:`UnsupportedCase`.
 
 A stepper that breaks the contract — :meth:`Stepper._states` returns anything but
-:class:`~harness.model.trajectory.BodyStates` of arrays shaped (n_bodies, 3) and (n_bodies, 4) —
+:class:`~mbh._harness.model.trajectory.BodyStates` of arrays shaped (n_bodies, 3) and (n_bodies, 4) —
 ends the run ``failed`` with the shape it gave.  The reason of a run that a third-party adapter's
 own code ended (an exception, a broken contract) names the adapter, its package and the stage
 (:func:`blame`), so a campaign's row points at the package to fix.
@@ -44,8 +44,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates, Trajectory
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 #: A body whose position (m), velocity (m/s) or angular velocity (rad/s) exceeds this in norm has
 #: diverged (the same limit as the integrators' default ``divergence_limit``).
@@ -57,7 +57,7 @@ GRID_RTOL = 1e-9
 #: has ``closure_equations(mech: Mechanism, joint: Joint) -> int``, the number of constraint
 #: equations the engine closes a loop cut at ``joint`` with, or this value when it cannot close
 #: that joint at all; it is large, so a spanning tree
-#: (:func:`harness.model.topology.spanning_tree`) cuts such a joint only when it must.
+#: (:func:`mbh._harness.model.topology.spanning_tree`) cuts such a joint only when it must.
 UNCLOSABLE = 1000
 
 

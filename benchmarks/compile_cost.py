@@ -58,7 +58,7 @@ def main(argv: list[str]) -> None:
     times = CompileTimes()
     event.register("numba:compile", times)
     began = time.perf_counter()
-    from harness.cli import main as mbh
+    from mbh._harness.cli import main as mbh
 
     mbh(argv)
     wall = time.perf_counter() - began

@@ -1,4 +1,4 @@
-"""How well the history's step detection (:mod:`harness.report.changepoints`) finds steps in
+"""How well the history's step detection (:mod:`mbh._harness.report.changepoints`) finds steps in
 synthetic histories with the noise measured on this machine, and how often it calls noise a step.
 
 Run:  .venv/bin/python benchmarks/history_detection.py [--histories 100] [--runs 30] [--seed 1]
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
+from mbh._harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
 
 #: Noise levels of calibrated time, σ of the natural log per run (see the module docstring).
 NOISE_LEVELS = (0.036, 0.1, 0.25)

@@ -23,9 +23,9 @@ import time
 
 import pandas as pd
 
-from harness.run.campaign import run_campaign
-from harness.run.executor import usable_cores
-from harness.run.spec import load_campaign
+from mbh._harness.run.campaign import run_campaign
+from mbh._harness.run.executor import usable_cores
+from mbh._harness.run.spec import load_campaign
 
 #: Columns that differ between two runs of the same cases by design: times and the run's ids.
 MACHINE_COLUMNS = ("run_id", "wall_time_s", "wall_time_per_sim_s", "wall_time_per_step_s",

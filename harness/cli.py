@@ -5,9 +5,9 @@ mechanism that cannot be assembled) prints one clear message per problem on stde
 status 2; it never shows a traceback.
 
 ``--json`` output is strict JSON (RFC 8259), whatever the numbers: a non-finite value is written as
-one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (:mod:`harness.common.jsonout`), and what
+one of the strings ``"NaN"``, ``"Infinity"``, ``"-Infinity"`` (:mod:`mbh._harness.common.jsonout`), and what
 an engine library prints while a case runs is captured at the file-descriptor level and kept in
-the case's ``notes``, never on stdout (:mod:`harness.common.capture`).
+the case's ``notes``, never on stdout (:mod:`mbh._harness.common.capture`).
 """
 
 from __future__ import annotations
@@ -17,13 +17,13 @@ import signal
 import sys
 import time
 
-from harness.common import capture, jsonout, waits
-from harness.common.errors import MbhError
-from harness.common.numbers import format_number
+from mbh._harness.common import capture, jsonout, waits
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.numbers import format_number
 
-from harness.model import scenario
-from harness.model.scenario import ScenarioError
-from harness.measure.verdict import Bounds
+from mbh._harness.model import scenario
+from mbh._harness.model.scenario import ScenarioError
+from mbh._harness.measure.verdict import Bounds
 
 #: Most steps ``mbh simulate`` will attempt (a run longer than this is an input error).
 MAX_STEPS = 1e8
@@ -83,18 +83,18 @@ def _names(args) -> list[str]:
 
 
 def cmd_check(args) -> int:
-    """Kinematic analysis by the harness's neutral kinematics (:mod:`harness.neutral.assembly`,
-    :mod:`harness.neutral.mobility`): assembly residuals, rank, mobility, redundant equations, singularity.
+    """Kinematic analysis by the harness's neutral kinematics (:mod:`mbh._harness.neutral.assembly`,
+    :mod:`mbh._harness.neutral.mobility`): assembly residuals, rank, mobility, redundant equations, singularity.
 
     ``n_coordinates`` counts twist coordinates (6 per spatial body, 3 per planar body) and
     ``n_equations`` the joint rows (no driver, no normalisation rows);
     ``redundant_equation_labels`` names the rows the rank-revealing QR leaves over and
     ``dependent_equation_labels`` every row taking part in a dependency (any of which could be
     the one dropped: all 30 on Bricard's mechanism).  A start at a singular
-    configuration (condition number above :data:`harness.neutral.mobility.CONDITION_LIMIT`, or rank lost) is
+    configuration (condition number above :data:`mbh._harness.neutral.mobility.CONDITION_LIMIT`, or rank lost) is
     refused: its entry has the ``error`` and, with the rank analysis there, a ``warning``.
     """
-    from harness.neutral.assembly import AssemblyError, assemble
+    from mbh._harness.neutral.assembly import AssemblyError, assemble
 
     mechanisms = [_load(name) for name in _names(args)]  # a bad file: exit 2 before any output
     results, failed = [], False
@@ -137,7 +137,7 @@ def cmd_methods(args) -> int:
 
 
 def _adapter(name: str):
-    from adapters import get_adapter
+    from mbh._adapters import get_adapter
 
     try:
         return get_adapter(name)
@@ -149,7 +149,7 @@ def cmd_adapters(args) -> int:
     """The registered adapters (built-in and from the ``mbh.adapters`` entry points): origin,
     package version, engine version and method count; a row's ``problem`` says why an adapter
     cannot be used (and exit 1)."""
-    from adapters import inventory
+    from mbh._adapters import inventory
 
     rows = inventory()
     if args.json:
@@ -169,8 +169,8 @@ def _bounds(text: str | None) -> Bounds:
 
 
 def cmd_simulate(args) -> int:
-    from harness.run.case import run_case
-    from harness.references.build import ReferenceBuildError, reference_trajectory
+    from mbh._harness.run.case import run_case
+    from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
 
     mech = _load(args.name)
     adapter = _adapter(args.adapter)
@@ -210,8 +210,8 @@ def cmd_simulate(args) -> int:
 def cmd_reference(args) -> int:
     """Build (or find) a scene's verified reference ahead of its first case and say where it is,
     how well its two routes agree and what it cost; exit 1 when the build is refused."""
-    from harness.references.build import ReferenceBuildError, load_or_build
-    from harness.store.reference_files import reference_paths
+    from mbh._harness.references.build import ReferenceBuildError, load_or_build
+    from mbh._harness.store.reference_files import reference_paths
 
     mech = _load(args.name)
     try:
@@ -233,10 +233,10 @@ def cmd_reference(args) -> int:
 
 
 def cmd_warm_up(args) -> int:
-    """Compile the in-house kernels and loops ahead of the first runs (harness.run.warm_up) and
+    """Compile the in-house kernels and loops ahead of the first runs (mbh._harness.run.warm_up) and
     say what each case compiled and how long it took; a failed case is listed, not fatal."""
-    from harness.run.executor import usable_cores
-    from harness.run.warm_up import warm_up
+    from mbh._harness.run.executor import usable_cores
+    from mbh._harness.run.warm_up import warm_up
 
     began = time.perf_counter()
     warmed = warm_up(args.jobs or usable_cores())
@@ -256,7 +256,7 @@ def cmd_warm_up(args) -> int:
 def cmd_export(args) -> int:
     mech = _load(args.name)
     adapter = _adapter(args.adapter)
-    from adapters.base import UnsupportedCase
+    from mbh._adapters.base import UnsupportedCase
 
     try:
         text = adapter.export(mech)
@@ -271,7 +271,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_seed_table(args) -> int:
-    from harness.jobs.seedtable import format_rows, seed_rows
+    from mbh._harness.jobs.seedtable import format_rows, seed_rows
 
     rows = seed_rows(repeats=args.repeats, bounds=_bounds(args.bounds))
     if args.json:
@@ -288,7 +288,7 @@ def _results_root(args):
 
 
 def _open_run(run_id: str, root):
-    from harness.store.runs import RunStore
+    from mbh._harness.store.runs import RunStore
 
     try:
         return RunStore.open(run_id, root)
@@ -320,10 +320,10 @@ def _interrupted_exit(stop: KeyboardInterrupt) -> int:
 
 
 def cmd_run(args) -> int:
-    """Run a campaign into the result store (see :mod:`harness.run.campaign`)."""
-    from harness.run.spec import CampaignError, load_campaign
-    from harness.run.campaign import CampaignInterrupted, RunnerError, run_campaign
-    from harness.store.runs import StoreError
+    """Run a campaign into the result store (see :mod:`mbh._harness.run.campaign`)."""
+    from mbh._harness.run.spec import CampaignError, load_campaign
+    from mbh._harness.run.campaign import CampaignInterrupted, RunnerError, run_campaign
+    from mbh._harness.store.runs import StoreError
 
     try:
         campaign = load_campaign(args.campaign)
@@ -355,8 +355,8 @@ BENCH_PARTS = ("front", "overhead", "fallback", "scaling", "references")
 
 
 def cmd_bench(args) -> int:
-    """The speed figures of :mod:`harness.jobs.bench`, measured in this run, printed as tables."""
-    from harness.jobs import bench
+    """The speed figures of :mod:`mbh._harness.jobs.bench`, measured in this run, printed as tables."""
+    from mbh._harness.jobs import bench
 
     parts = args.parts.split(",")
     unknown = sorted(set(parts) - set(BENCH_PARTS))
@@ -402,9 +402,9 @@ def cmd_bench(args) -> int:
 
 
 def _bench_front(args) -> None:
-    from harness.run.spec import load_campaign
-    from harness.report.summary import front_ratio_table
-    from harness.run.campaign import run_campaign
+    from mbh._harness.run.spec import load_campaign
+    from mbh._harness.report.summary import front_ratio_table
+    from mbh._harness.run.campaign import run_campaign
 
     store = run_campaign(load_campaign("bench"), workers=args.workers, root=_results_root(args),
                          quiet=True)
@@ -419,7 +419,7 @@ def _bench_front(args) -> None:
 
 
 def cmd_runs(args) -> int:
-    from harness.store.runs import list_runs
+    from mbh._harness.store.runs import list_runs
 
     try:
         manifests = list_runs(_results_root(args))
@@ -471,7 +471,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_compare(args) -> int:
-    from harness.store.compare import comparable_calibrations, compare_runs
+    from mbh._harness.store.compare import comparable_calibrations, compare_runs
 
     root = _results_root(args)
     a, b = _open_run(args.run_a, root), _open_run(args.run_b, root)
@@ -490,9 +490,9 @@ def cmd_compare(args) -> int:
 
 
 def cmd_report(args) -> int:
-    """Build a stored run's report (HTML and/or PDF, see :mod:`harness.report.build`); print the
+    """Build a stored run's report (HTML and/or PDF, see :mod:`mbh._harness.report.build`); print the
     paths written, the HTML last."""
-    from harness.report.build import ReportError, build_report, parse_formats
+    from mbh._harness.report.build import ReportError, build_report, parse_formats
 
     try:
         written = build_report(args.run, against=args.against, formats=parse_formats(args.format),
@@ -506,9 +506,9 @@ def cmd_report(args) -> int:
 
 def cmd_history(args) -> int:
     """Build a campaign's history page from its stored runs (see
-    :mod:`harness.report.history_page`); print its path, or with --json the runs and changes."""
-    from harness.report.history import HistoryError, find_changes, load_history
-    from harness.report.history_page import build_history
+    :mod:`mbh._harness.report.history_page`); print its path, or with --json the runs and changes."""
+    from mbh._harness.report.history import HistoryError, find_changes, load_history
+    from mbh._harness.report.history_page import build_history
 
     try:
         history = load_history(args.campaign, _results_root(args))
@@ -531,11 +531,11 @@ def cmd_history(args) -> int:
 
 def cmd_nightly(args) -> int:
     """Run a campaign, search its history and compare it with its previous run, report, and gate
-    on regressions (see :mod:`harness.jobs.nightly`); prints the Markdown summary; exit 1 on a
+    on regressions (see :mod:`mbh._harness.jobs.nightly`); prints the Markdown summary; exit 1 on a
     regression."""
-    from harness.run.spec import CampaignError
-    from harness.jobs.nightly import nightly
-    from harness.run.campaign import CampaignInterrupted, RunnerError
+    from mbh._harness.run.spec import CampaignError
+    from mbh._harness.jobs.nightly import nightly
+    from mbh._harness.run.campaign import CampaignInterrupted, RunnerError
 
     try:
         outcome = nightly(args.campaign, root=_results_root(args), workers=args.workers,
@@ -687,7 +687,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help=JSON_HELP)
     p.set_defaults(func=cmd_history)
 
-    from harness.jobs.nightly import (DEFAULT_CAMPAIGN, DEFAULT_GATE, ERROR_FACTOR, GATES,
+    from mbh._harness.jobs.nightly import (DEFAULT_CAMPAIGN, DEFAULT_GATE, ERROR_FACTOR, GATES,
                                       TIME_FACTOR)
 
     p = sub.add_parser("nightly", help="run a campaign, gate on the steps of its history (or on "

@@ -16,18 +16,18 @@ Examples
 'mujoco'
 """
 
-from harness.common.errors import MbhError
-from harness.measure.verdict import Bounds
-from harness.model.builder import MechanismBuilder
-from harness.model.mechanism import Mechanism
-from harness.model.scenario import ScenarioError, scenario_names
-from harness.model.scenario import load as load_scenario
-from harness.run.case import CaseResult
-from harness.run.single import CaseInputError
-from harness.run.single import run_one as run_case
-from harness.run.spec import CampaignError, campaign_names, load_campaign
-from harness.store.compare import compare_runs
-from harness.store.runs import RunStore, list_runs, load_run, results_root
+from mbh._harness.common.errors import MbhError
+from mbh._harness.measure.verdict import Bounds
+from mbh._harness.model.builder import MechanismBuilder
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.scenario import ScenarioError, scenario_names
+from mbh._harness.model.scenario import load as load_scenario
+from mbh._harness.run.case import CaseResult
+from mbh._harness.run.single import CaseInputError
+from mbh._harness.run.single import run_one as run_case
+from mbh._harness.run.spec import CampaignError, campaign_names, load_campaign
+from mbh._harness.store.compare import compare_runs
+from mbh._harness.store.runs import RunStore, list_runs, load_run, results_root
 
 
 def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool = False,
@@ -60,7 +60,7 @@ def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool
     CampaignError
         The file does not validate (every problem, naming the file and field).
     """
-    from harness.run.campaign import run_campaign as run
+    from mbh._harness.run.campaign import run_campaign as run
 
     return run(load_campaign(campaign), workers=workers, root=root, reuse=reuse,
                resume=resume, quiet=quiet)

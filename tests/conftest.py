@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from harness.model import scenario
+from mbh._harness.model import scenario
 from tests.helpers import variant_text
 
 

@@ -18,8 +18,8 @@ import numpy as np
 from hypothesis import HealthCheck, settings
 from hypothesis import strategies as st
 
-from harness.model import scenario
-from harness.model.mechanism import Mechanism
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import Mechanism
 
 #: What every fuzz profile starts from (each sets its own ``max_examples``; the slow ones draw
 #: fresh randomness with ``derandomize=False``).

@@ -15,10 +15,10 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 import mbh
-from harness import cli
-from harness.model import scenario
-from harness.model.scenario import SCENARIO_DIR
-from harness.neutral.dynamics import start_accelerations
+from mbh._harness import cli
+from mbh._harness.model import scenario
+from mbh._harness.model.scenario import SCENARIO_DIR
+from mbh._harness.neutral.dynamics import start_accelerations
 
 #: The tests/ folder, the repository's root above it, and the committed test data.
 TESTS = Path(__file__).resolve().parent
@@ -117,7 +117,7 @@ def measured_acceleration_gap(adapter, model, expected) -> tuple[float, float]:
 # --- The ``mbh`` command (tests/report/).
 
 #: ``mbh`` as a subprocess command line.
-MBH = [sys.executable, "-m", "harness.cli"]
+MBH = [sys.executable, "-m", "mbh._harness.cli"]
 
 
 def run_mbh(*argv: str) -> tuple[int, str, str]:

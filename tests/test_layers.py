@@ -8,8 +8,8 @@ resolved against the importing package) is checked:
    the layers its entry lists, all of them below it: the harness's layers in the order of its data
    flow, with ``adapters`` between the measuring stick and the references.  A report reads the
    store only: it may not import the references, the runner or an adapter.
-2. nothing outside ``adapters/inhouse/`` imports ``adapters.inhouse``;
-3. ``harness/`` reaches adapters only through the registry: ``adapters`` and ``adapters.base``;
+2. nothing outside ``adapters/inhouse/`` imports ``mbh._adapters.inhouse``;
+3. ``harness/`` reaches adapters only through the registry: ``adapters`` and ``mbh._adapters.base``;
 4. the contestants do not import the judge: of ``harness``, ``adapters/`` imports only
    :data:`ADAPTERS_MAY_IMPORT` (the model, the body graph, trajectories and the common start);
 5. engine adapter packages (``adapters/*_adapter``) never import each other;
@@ -27,23 +27,23 @@ ROOT = Path(__file__).resolve().parent.parent
 PACKAGES = ("harness", "adapters", "mbh")
 #: The layers, bottom first: (name, module prefixes, layers it may import).
 LAYERS = (
-    ("common", ("harness.common",), ()),
-    ("model", ("harness.model",), ("common",)),
-    ("neutral", ("harness.neutral",), ("common", "model")),
-    ("measure", ("harness.measure",), ("common", "model", "neutral")),
-    ("store", ("harness.store",), ("common", "model")),
-    ("adapters", ("adapters",), ("common", "model", "neutral")),
-    ("references", ("harness.references",),
+    ("common", ("mbh._harness.common",), ()),
+    ("model", ("mbh._harness.model",), ("common",)),
+    ("neutral", ("mbh._harness.neutral",), ("common", "model")),
+    ("measure", ("mbh._harness.measure",), ("common", "model", "neutral")),
+    ("store", ("mbh._harness.store",), ("common", "model")),
+    ("adapters", ("mbh._adapters",), ("common", "model", "neutral")),
+    ("references", ("mbh._harness.references",),
      ("common", "model", "neutral", "measure", "store", "adapters")),
-    ("run", ("harness.run",),
+    ("run", ("mbh._harness.run",),
      ("common", "model", "neutral", "measure", "store", "adapters", "references")),
-    ("report", ("harness.report",), ("common", "model", "neutral", "measure", "store")),
-    ("testing", ("harness.testing",),
+    ("report", ("mbh._harness.report",), ("common", "model", "neutral", "measure", "store")),
+    ("testing", ("mbh._harness.testing",),
      ("common", "model", "neutral", "measure", "store", "adapters", "references", "run")),
-    ("jobs", ("harness.jobs",),
+    ("jobs", ("mbh._harness.jobs",),
      ("common", "model", "neutral", "measure", "store", "adapters", "references", "run",
       "report")),
-    ("cli", ("harness.cli", "harness"),
+    ("cli", ("mbh._harness.cli", "mbh._harness"),
      ("common", "model", "neutral", "measure", "store", "adapters", "references", "run",
       "report", "testing", "jobs")),
     ("api", ("mbh",),
@@ -51,13 +51,17 @@ LAYERS = (
       "report", "testing", "jobs")),
 )
 _RANK = {name: rank for rank, (name, _, _) in enumerate(LAYERS)}
-HARNESS_MAY_IMPORT = {"adapters", "adapters.base"}
-ADAPTERS_MAY_IMPORT = {"harness.common", "harness.model.mechanism", "harness.model.trajectory",
-                       "harness.model.topology", "harness.neutral.start"}
+HARNESS_MAY_IMPORT = {"mbh._adapters", "mbh._adapters.base"}
+ADAPTERS_MAY_IMPORT = {"mbh._harness.common", "mbh._harness.model.mechanism",
+                       "mbh._harness.model.trajectory", "mbh._harness.model.topology",
+                       "mbh._harness.neutral.start"}
+#: The import package each repository folder is mapped to (pyproject.toml's package-dir).
+MAPPED = {"harness": "mbh._harness", "adapters": "mbh._adapters", "mbh": "mbh"}
 
 
 def module_name(path: Path) -> str:
-    parts = path.relative_to(ROOT).with_suffix("").parts
+    folder, *parts = path.relative_to(ROOT).with_suffix("").parts
+    parts = [MAPPED[folder], *parts]
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
 
 
@@ -90,7 +94,8 @@ def within(name: str, package: str) -> bool:
     return name == package or name.startswith(package + ".")
 
 
-ENGINE_PACKAGES = {f"adapters.{path.name}" for path in (ROOT / "adapters").glob("*_adapter")
+ENGINE_PACKAGES = {f"mbh._adapters.{path.name}"
+                   for path in (ROOT / "adapters").glob("*_adapter")
                    if (path / "__init__.py").exists()}
 
 
@@ -124,18 +129,19 @@ def violation(importer: str, imported: str) -> str | None:
     reason = layer_violation(importer, imported)
     if reason:
         return reason
-    if within(imported, "adapters.inhouse") and not within(importer, "adapters.inhouse"):
+    if within(imported, "mbh._adapters.inhouse") and not within(importer, "mbh._adapters.inhouse"):
         return "only adapters/inhouse may import the in-house formulation"
-    if within(importer, "harness") and within(imported, "adapters"):
+    if within(importer, "mbh._harness") and within(imported, "mbh._adapters"):
         allowed = imported in HARNESS_MAY_IMPORT or any(
             imported.rpartition(".")[0] == package for package in HARNESS_MAY_IMPORT)
-        if not allowed or engine_package(imported) or imported.startswith("adapters.integrators"):
-            return "harness reaches adapters only through the registry (adapters, adapters.base)"
-    if within(importer, "adapters") and within(imported, "harness"):
-        if imported != "harness" and not any(within(imported, m) for m in ADAPTERS_MAY_IMPORT):
+        if not allowed or engine_package(imported) or within(imported, "mbh._adapters.integrators"):
+            return ("harness reaches adapters only through the registry (mbh._adapters, "
+                    "mbh._adapters.base)")
+    if within(importer, "mbh._adapters") and within(imported, "mbh._harness"):
+        if imported != "mbh._harness" and not any(within(imported, m) for m in ADAPTERS_MAY_IMPORT):
             return ("adapters may import only " + ", ".join(sorted(ADAPTERS_MAY_IMPORT))
                     + ", not the measuring stick")
-        if imported == "harness":
+        if imported == "mbh._harness":
             return "adapters may not import the harness package wholesale"
     own, other = engine_package(importer), engine_package(imported)
     if own and other and own != other:
@@ -223,31 +229,31 @@ def test_the_cycle_finder_finds_a_cycle():
 
 
 def test_the_layer_rule_refuses_upward_and_sideways_imports():
-    assert "upward" in layer_violation("harness.measure.verdict", "harness.run.case.run_case")
-    assert "upward" in layer_violation("harness.model.scenario", "harness.references.build")
-    assert layer_violation("harness.report.build", "harness.references.build.reference_trajectory")
-    assert layer_violation("harness.report.failures", "adapters.get_adapter")
-    assert layer_violation("harness.store.runs", "harness.measure.metrics")
-    assert layer_violation("harness.run.campaign", "harness.store.runs.RunStore") is None
-    assert layer_violation("harness.cli", "harness.jobs.nightly") is None
+    assert "upward" in layer_violation("mbh._harness.measure.verdict", "mbh._harness.run.case.run_case")
+    assert "upward" in layer_violation("mbh._harness.model.scenario", "mbh._harness.references.build")
+    assert layer_violation("mbh._harness.report.build", "mbh._harness.references.build.reference_trajectory")
+    assert layer_violation("mbh._harness.report.failures", "mbh._adapters.get_adapter")
+    assert layer_violation("mbh._harness.store.runs", "mbh._harness.measure.metrics")
+    assert layer_violation("mbh._harness.run.campaign", "mbh._harness.store.runs.RunStore") is None
+    assert layer_violation("mbh._harness.cli", "mbh._harness.jobs.nightly") is None
 
 
 def test_the_checker_sees_every_kind_of_violation():
     # The rules themselves, on the four forbidden patterns and their allowed neighbours.
-    assert violation("adapters.pinocchio_adapter.adapter", "adapters.inhouse.constraints")
-    assert violation("adapters.integrators.base", "adapters.inhouse.linalg.solve")
-    assert violation("harness.measure.metrics", "adapters.inhouse.states.body_states")
-    assert violation("harness.cli", "adapters.mujoco_adapter.export_mjcf")
-    assert violation("harness.cli", "adapters.integrators.make_integrator")
-    assert violation("adapters.inhouse.stabilisation", "harness.measure.energy.mechanical_energy")
-    assert violation("adapters.mujoco_adapter.build", "harness.model.outputs")
-    assert violation("adapters.mujoco_adapter.build", "adapters.pybullet_adapter.quiet")
-    assert violation("adapters.inhouse.adapter", "adapters.inhouse.driver") is None
-    assert violation("harness.cli", "adapters.get_adapter") is None
-    assert violation("harness.cli", "adapters.base.UnsupportedCase") is None
-    assert violation("adapters.pinocchio_adapter.adapter", "adapters.integrators.RUNNING") is None
-    assert violation("adapters.mujoco_adapter.build", "harness.model.mechanism.Mechanism") is None
-    assert violation("adapters.pinocchio_adapter.adapter", "adapters.pinocchio_adapter.build") \
+    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.inhouse.constraints")
+    assert violation("mbh._adapters.integrators.base", "mbh._adapters.inhouse.linalg.solve")
+    assert violation("mbh._harness.measure.metrics", "mbh._adapters.inhouse.states.body_states")
+    assert violation("mbh._harness.cli", "mbh._adapters.mujoco_adapter.export_mjcf")
+    assert violation("mbh._harness.cli", "mbh._adapters.integrators.make_integrator")
+    assert violation("mbh._adapters.inhouse.stabilisation", "mbh._harness.measure.energy.mechanical_energy")
+    assert violation("mbh._adapters.mujoco_adapter.build", "mbh._harness.model.outputs")
+    assert violation("mbh._adapters.mujoco_adapter.build", "mbh._adapters.pybullet_adapter.quiet")
+    assert violation("mbh._adapters.inhouse.adapter", "mbh._adapters.inhouse.driver") is None
+    assert violation("mbh._harness.cli", "mbh._adapters.get_adapter") is None
+    assert violation("mbh._harness.cli", "mbh._adapters.base.UnsupportedCase") is None
+    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.integrators.RUNNING") is None
+    assert violation("mbh._adapters.mujoco_adapter.build", "mbh._harness.model.mechanism.Mechanism") is None
+    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.pinocchio_adapter.build") \
         is None
 
 
@@ -256,8 +262,8 @@ def test_relative_and_function_level_imports_are_resolved(tmp_path, monkeypatch)
     package.mkdir(parents=True)
     (package / "__init__.py").write_text("")
     (package / "x.py").write_text("def f():\n    from ..inhouse import kernels\n"
-                                  "    import harness.measure.energy\n")
+                                  "    import mbh._harness.measure.energy\n")
     monkeypatch.setitem(globals(), "ROOT", tmp_path)
     found = list(imports(package / "x.py"))
-    assert found[0][:2] == (2, "adapters.inhouse.kernels")
-    assert found[1][:2] == (3, "harness.measure.energy")
+    assert found[0][:2] == (2, "mbh._adapters.inhouse.kernels")
+    assert found[1][:2] == (3, "mbh._harness.measure.energy")

@@ -10,7 +10,7 @@ run: built from the mechanism, solved, read back), :mod:`.adapter` (the adapter:
 methods, simulate).
 """
 
-from adapters.exudyn_adapter.adapter import ExudynAdapter, ExudynModel
-from adapters.exudyn_adapter.system import ExudynSystem
+from mbh._adapters.exudyn_adapter.adapter import ExudynAdapter, ExudynModel
+from mbh._adapters.exudyn_adapter.system import ExudynSystem
 
 __all__ = ["ExudynAdapter", "ExudynModel", "ExudynSystem"]

@@ -1,7 +1,7 @@
 """The Exudyn adapter: the harness's contract over :mod:`.methods` and :mod:`.system`.  ``build``
 only checks that Exudyn can represent the mechanism; every run builds a fresh
-:class:`~adapters.exudyn_adapter.system.ExudynSystem`, with Exudyn's console output off, and is
-driven by the shared run loop (:meth:`adapters.base.Adapter.simulate`) through
+:class:`~mbh._adapters.exudyn_adapter.system.ExudynSystem`, with Exudyn's console output off, and is
+driven by the shared run loop (:meth:`mbh._adapters.base.Adapter.simulate`) through
 :class:`_ExudynStepper`.
 """
 
@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import exudyn as exu
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
-from adapters.exudyn_adapter.methods import (
+from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
+from mbh._adapters.exudyn_adapter.methods import (
     _BEST,
     _GENALPHA_PARAMS,
     _NEWMARK_PARAMS,
@@ -24,9 +24,9 @@ from adapters.exudyn_adapter.methods import (
     _validate_params,
     _write_period,
 )
-from adapters.exudyn_adapter.system import ExudynSystem
-from harness.model.mechanism import PLANAR_JOINT_TYPES, Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.exudyn_adapter.system import ExudynSystem
+from mbh._harness.model.mechanism import PLANAR_JOINT_TYPES, Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 
 @dataclass(frozen=True)

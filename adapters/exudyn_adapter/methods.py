@@ -42,7 +42,7 @@ _NEWMARK_PARAMS = {"beta": 0.25, "gamma": 0.5, "index2": False, **_COMMON_PARAMS
 #: Rule: the smallest max |crank angle − verified reference| (the main output) in the most of the
 #: 8 cases fourbar, fourbar_spatial, slider_crank, slider_crank_planar × dt 1e-3, 1e-4 s over each
 #: scene's duration (4, 4, 8, 4 s), among candidates whose every one of those runs the measuring
-#: stick (``harness.measure.verdict.judge``) finds ok; a winner that ends the shipped hard scenes
+#: stick (``mbh._harness.measure.verdict.judge``) finds ok; a winner that ends the shipped hard scenes
 #: earlier than the incumbent is weighed against its gain.  Generalized-α (index 3, ρ∞ 0.9, full
 #: Newton, rtol = atol = 1e-12) holds the position constraints to round-off and trades a
 #: velocity-level violation that shrinks 100× per 10× smaller step; the index-2 trapezoidal rule

@@ -1,6 +1,6 @@
 """The Exudyn system of one run: :class:`ExudynSystem` translates the mechanism into a fresh
 ``SystemContainer`` at the harness's assembled start, runs a solver on it and reads the sensed body
-states back as :class:`~harness.model.trajectory.BodyStates` per stored step.
+states back as :class:`~mbh._harness.model.trajectory.BodyStates` per stored step.
 
 Model translation
 -----------------
@@ -17,7 +17,7 @@ Model translation
   stabilisation springs).
 
 Every run builds a fresh ``SystemContainer`` whose reference configuration is the harness's
-assembled start (:func:`harness.neutral.start.initial_state`), so displacement-type outputs of Exudyn are
+assembled start (:func:`mbh._harness.neutral.start.initial_state`), so displacement-type outputs of Exudyn are
 never needed: the body states are read through ``SensorBody`` (``storeInternal=True``) as world
 position, rotation matrix, velocity and angular velocity.
 """
@@ -32,9 +32,9 @@ import exudyn.itemInterface as eii
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.exudyn_adapter.state import _quaternion_rate, _quaternions
-from harness.neutral.start import initial_state
-from harness.model.mechanism import (
+from mbh._adapters.exudyn_adapter.state import _quaternion_rate, _quaternions
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.model.mechanism import (
     GROUND,
     BodyForce,
     BodyTorque,
@@ -43,7 +43,7 @@ from harness.model.mechanism import (
     Mechanism,
     SpringDamper,
 )
-from harness.model.trajectory import BodyStates
+from mbh._harness.model.trajectory import BodyStates
 
 _SENSED = ("Position", "RotationMatrix", "Velocity", "AngularVelocity")
 
@@ -122,7 +122,7 @@ class ExudynSystem:
         Node type of spatial bodies (see the module notes).
     sensors : bool
         Add the body sensors :meth:`sensed` reads (False: a system that is only solved, for
-        :meth:`~adapters.exudyn_adapter.adapter.ExudynAdapter.bare_loop`).
+        :meth:`~mbh._adapters.exudyn_adapter.adapter.ExudynAdapter.bare_loop`).
     """
 
     def __init__(self, mech: Mechanism, rotation: str, sensors: bool = True):

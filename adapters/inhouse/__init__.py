@@ -1,6 +1,6 @@
 """The in-house formulation (Rouvinen 2003): its compiled kernels are cached where
-:mod:`harness.common.kernel_cache` places them, set up here before any of its modules loads."""
+:mod:`mbh._harness.common.kernel_cache` places them, set up here before any of its modules loads."""
 
-from harness.common import kernel_cache
+from mbh._harness.common import kernel_cache
 
 kernel_cache.install()

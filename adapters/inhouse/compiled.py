@@ -2,22 +2,22 @@
 ``none``, ``baumgarte``, ``direct`` or ``partition`` formulation in one numba loop, no Python per
 step.
 
-The same arithmetic as the Python path (:func:`adapters.integrators.nystrom.nystrom_step` on
-:class:`~adapters.inhouse.stabilisation.Formulation`), so the two agree to round-off: the stages
+The same arithmetic as the Python path (:func:`mbh._adapters.integrators.nystrom.nystrom_step` on
+:class:`~mbh._adapters.inhouse.stabilisation.Formulation`), so the two agree to round-off: the stages
 of the tableau (c, A, Ā, b, b̄), each stage's q̈ from the fused right-hand side
-(:func:`~adapters.inhouse.dynamics.index1_acceleration`: mass matrix, forces, Φ_q, γ and the
+(:func:`~mbh._adapters.inhouse.dynamics.index1_acceleration`: mass matrix, forces, Φ_q, γ and the
 range-space solve of Rouvinen 2003, eq. 77, with Baumgarte's γ − 2αΦ̇ − β²Φ of eq. 110), then for ``direct``
 the position projection (eq. 127, iterated to ``proj_tol``) and the velocity projection
 (eq. 137) with the truncated pseudo-inverse, then the divergence check of
-:meth:`adapters.integrators.base.Integrator.step`.
+:meth:`mbh._adapters.integrators.base.Integrator.step`.
 
-Coordinate partitioning (:class:`~adapters.inhouse.partition.CoordinatePartitioning`, Rouvinen 2003
+Coordinate partitioning (:class:`~mbh._adapters.inhouse.partition.CoordinatePartitioning`, Rouvinen 2003
 eq. 78–89) integrates the independent coordinates; every stage first recovers the dependent ones
 by Newton–Raphson (:func:`expand`), and before every step but the first the split is checked as
 the Python path checks it.  A step that needs a new split returns :data:`REPARTITION` to the
 caller, which chooses it (rare: a few times per run) and calls again.
 
-Where :mod:`adapters.inhouse.generated` made them for the formulation (``loop=generated``, the
+Where :mod:`mbh._adapters.inhouse.generated` made them for the formulation (``loop=generated``, the
 default), the right-hand side, the projection's parts and ρ̂ come from functions generated for
 it, the same numbers as the kernels at a fraction of the cost; each hands a call back to the
 kernels when one of its guards fails (counted as ``kernel_calls``).
@@ -32,14 +32,14 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from adapters.inhouse import kernels
-from adapters.inhouse.banded import (conditioning_indicator, min_norm_correction,
+from mbh._adapters.inhouse import kernels
+from mbh._adapters.inhouse.banded import (conditioning_indicator, min_norm_correction,
                                      min_norm_correction_and_indicator, pattern_matvec)
-from adapters.inhouse.dynamics import index1_acceleration
-from adapters.inhouse.fold import passage_times, plan_passage
-from adapters.inhouse.generated import (ACCELERATION, INDICATOR, POSITION_CORRECTION,
+from mbh._adapters.inhouse.dynamics import index1_acceleration
+from mbh._adapters.inhouse.fold import passage_times, plan_passage
+from mbh._adapters.inhouse.generated import (ACCELERATION, INDICATOR, POSITION_CORRECTION,
                                         RESIDUAL_SIZE, VELOCITY_CORRECTION)
-from adapters.inhouse.rank import full_pivot_elimination
+from mbh._adapters.inhouse.rank import full_pivot_elimination
 
 RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILED_RANK, \
     REPARTITION = range(7)
@@ -56,7 +56,7 @@ RUNNING, DIVERGED_NONFINITE, DIVERGED_LIMIT, FAILED_LINALG, FAILED_NEWTON, FAILE
 GAINS, ROWS, CONSTRAINT_ARGS, DYNAMICS_ARGS, SPARSITY, GENERATED, GENERATED_STEPS = range(7)
 
 #: What :func:`_generated_run` returns when one of its functions declined a call of the next step
-#: (a guard, or :data:`~adapters.inhouse.generated.NEVER`): nothing of that step was kept, the
+#: (a guard, or :data:`~mbh._adapters.inhouse.generated.NEVER`): nothing of that step was kept, the
 #: full step runs instead.
 DECLINED = -1
 
@@ -101,9 +101,9 @@ def _rows_jacobian(q, t, rows, constraint_args, counters):
 def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, sparsity_arrays,
              generated, counters):
     """Direct violation correction (Rouvinen 2003, eq. 127 and 137) with the truncated pseudo-inverse;
-    the loop of :meth:`~adapters.inhouse.stabilisation.DirectCorrection.project` (and its stop
+    the loop of :meth:`~mbh._adapters.inhouse.stabilisation.DirectCorrection.project` (and its stop
     when an iteration no longer reduces max |Φ|).  Also returns the conditioning indicator ρ̂ of
-    the corrected configuration (:func:`~adapters.inhouse.banded.conditioning_indicator`).
+    the corrected configuration (:func:`~mbh._adapters.inhouse.banded.conditioning_indicator`).
     Each part comes from its generated function (``generated``, :mod:`.generated`) where that
     serves, else from the kernels."""
     n = q.shape[0]
@@ -146,7 +146,7 @@ def _project(q, v, t, rows, proj_tol, proj_max_iter, cut, constraint_args, spars
 @njit(cache=True)
 def expand(q_ind, v_ind, t, rows, constraint_args, partition, counters):
     """Full (q, q̇) from the independent (q_I, q̇_I) (Rouvinen 2003, eq. 80–84), as
-    :meth:`~adapters.inhouse.partition.CoordinatePartitioning.expand` does it: Newton from the
+    :meth:`~mbh._adapters.inhouse.partition.CoordinatePartitioning.expand` does it: Newton from the
     last solution moved along the sensitivity dq_D/dq_I, then q̇_D from it.
 
     ``partition`` = (independent (ni,), dependent (nd,), last (n,), sensitivity (nd, ni),
@@ -218,7 +218,7 @@ def _partitioned_acceleration(q_ind, v_ind, t, model, partition, counters):
 
 @njit(cache=True)
 def _nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters):
-    """One step of :func:`adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
+    """One step of :func:`mbh._adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
     operation order (so to the same bits), without a temporary array per tableau coefficient.
 
     Each stage's q̈ is written in place by the generated right-hand side
@@ -667,7 +667,7 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         Start time and step, s.  Step k ends at t0 + k·dt (no accumulated drift).
     first, last : int
     tableau : tuple (c (s,), A⁺ (s + 1, s), Ā⁺ (s + 1, s))
-        :func:`step_tableau` of the :class:`~adapters.integrators.nystrom.NystromTableau`.
+        :func:`step_tableau` of the :class:`~mbh._adapters.integrators.nystrom.NystromTableau`.
     model : tuple
         (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
         :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
@@ -685,9 +685,9 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
     limit : float
         Divergence limit on the 2-norms of q and q̇.
     passage : tuple (placement (3,), rho_zone, indicators (2,), count (1,) int64)
-        Placed passages of singular positions (:mod:`adapters.inhouse.fold`; zero placement
+        Placed passages of singular positions (:mod:`mbh._adapters.inhouse.fold`; zero placement
         turns them off): (c*, g/2) of the tableau and the formulation's clearance,
-        :data:`~adapters.inhouse.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
+        :data:`~mbh._adapters.inhouse.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
         points (updated in place) and the number of passages placed (incremented in place).
     counters : ndarray of int64, shape (5,)
         Incremented in place (:data:`RHS_EVALS` …).

@@ -1,14 +1,14 @@
 """The compiled stepping path of the linear multistep methods (Adams–Bashforth, Adams–Moulton,
-Gear/BDF: :class:`~adapters.integrators.multistep.LinearMultistep`) with the ``none``,
+Gear/BDF: :class:`~mbh._adapters.integrators.multistep.LinearMultistep`) with the ``none``,
 ``baumgarte`` and ``direct`` formulations: a whole run in one numba call, as
-:mod:`adapters.inhouse.compiled` runs the explicit one-step methods.
+:mod:`mbh._adapters.inhouse.compiled` runs the explicit one-step methods.
 
-The step is :class:`~adapters.integrators.multistep.LinearMultistep`'s on y = (q, q̇),
+The step is :class:`~mbh._adapters.integrators.multistep.LinearMultistep`'s on y = (q, q̇),
 f = (q̇, q̈) (Rouvinen 2003, eq. 94), in the same order: f at the step's start goes into the
 history; until the history holds the points the method reads, a classical RK4 step
-(:func:`adapters.inhouse.compiled._nystrom_step`, eqs. 102–106); then ψ of eq. 107 and, for an
+(:func:`mbh._adapters.inhouse.compiled._nystrom_step`, eqs. 102–106); then ψ of eq. 107 and, for an
 implicit method (β₀ ≠ 0), Newton's iteration on y − hβ₀ f(t_{n+1}, y) − ψ = 0 from the explicit
-Euler predictor, as :class:`~adapters.integrators.newton.NewtonSolver` iterates it: the
+Euler predictor, as :class:`~mbh._adapters.integrators.newton.NewtonSolver` iterates it: the
 iteration matrix I − hβ₀ J with J by forward differences at the last accepted state, kept
 across iterations and steps, refreshed when an iteration converges slowly, the convergence test
 on the scaled correction.  ``direct`` then projects the new state (eqs. 127, 137).  Each q̈ comes
@@ -29,16 +29,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from adapters.inhouse.compiled import (CONSTRAINT_ARGS, FACTORIZATIONS, FAILED_LINALG,
+from mbh._adapters.inhouse.compiled import (CONSTRAINT_ARGS, FACTORIZATIONS, FAILED_LINALG,
                                        FAILED_NEWTON, GENERATED, JACOBIAN_EVALS,
                                        NEWTON_ITERATIONS, PLAIN, PROJECTED, RHS_EVALS, ROWS,
                                        RUNNING, SPARSITY, _checked, _count_evaluation, _divergence,
                                        _hold_and_keep, _kernel_acceleration, _nystrom_step,
                                        _project, step_tableau)
-from adapters.inhouse.generated import ACCELERATION
-from adapters.integrators.multistep import LinearMultistep, points_read
-from adapters.integrators.newton import SLOW_RATE
-from adapters.integrators.nystrom import RK4
+from mbh._adapters.inhouse.generated import ACCELERATION
+from mbh._adapters.integrators.multistep import LinearMultistep, points_read
+from mbh._adapters.integrators.newton import SLOW_RATE
+from mbh._adapters.integrators.nystrom import RK4
 
 #: Slots of the Newton state array (``newton`` of :func:`method_arguments`): whether J is held,
 #: and hβ₀ of the factorised iteration matrix (NaN: none factorised).
@@ -60,9 +60,9 @@ def method_arguments(method_class: type[LinearMultistep], params: dict, n: int) 
     -------
     tuple
         (α (p + 1,), β (k + 1,), (tol, max_iter, the slow rate of
-        :data:`~adapters.integrators.newton.SLOW_RATE`: a module the kernels' fingerprint does
+        :data:`~mbh._adapters.integrators.newton.SLOW_RATE`: a module the kernels' fingerprint does
         not cover, so it comes as an argument), the RK4 start tableau of
-        :func:`~adapters.inhouse.compiled.step_tableau`, history (points, 2, 2n): (y, f) of the
+        :func:`~mbh._adapters.inhouse.compiled.step_tableau`, history (points, 2, 2n): (y, f) of the
         last steps' starts, newest first, held (1,) int64: points in it, J (2n, 2n), the LU
         factors of I − hβ₀J (2n, 2n), their row pivots (2n,) int64, Newton state (2,)); the
         arrays after the first four are updated in place.
@@ -138,7 +138,7 @@ def _acceleration_into(q, v, t, model, counters, out):
 @njit(cache=True)
 def _refresh_jacobian(jacobian, t, y, a, model, counters):
     """J = ∂f/∂y = [[0, I], [∂q̈/∂q, ∂q̈/∂q̇]] (2n, 2n) at (t, y) into ``jacobian``, by the
-    forward differences of :func:`adapters.integrators.newton.first_order_jacobian` (step
+    forward differences of :func:`mbh._adapters.integrators.newton.first_order_jacobian` (step
     √ε·max(1, |y_j|)); ``a`` is q̈ there.  Counted as the Python path counts it: 2n right-hand
     sides, 2n + 1 Jacobians (the formulation's and the integrator's), 2n factorisations."""
     size = y.shape[0]
@@ -177,7 +177,7 @@ def _factor(lu, pivots, jacobian, gamma, state, counters):
 
 @njit(cache=True, inline="always")
 def _iterate(t, psi, gamma, lu, pivots, newton, stop_when_slow, model, counters, buffers):
-    """:meth:`NewtonSolver._iterate <adapters.integrators.newton.NewtonSolver._iterate>` from
+    """:meth:`NewtonSolver._iterate <mbh._adapters.integrators.newton.NewtonSolver._iterate>` from
     the guess in ``buffers``' iterate (2n,), in place: whether it converged (scaled correction
     ≤ ``tol``)."""
     tol, max_iter, slow_rate = newton
@@ -211,7 +211,7 @@ def _iterate(t, psi, gamma, lu, pivots, newton, stop_when_slow, model, counters,
 
 @njit(cache=True, inline="always")
 def _newton_solve(t, gamma, t_start, y_start, f_start, dt, method, model, counters, buffers):
-    """:meth:`NewtonSolver.solve <adapters.integrators.newton.NewtonSolver.solve>`: y solving
+    """:meth:`NewtonSolver.solve <mbh._adapters.integrators.newton.NewtonSolver.solve>`: y solving
     y − γ f(t, y) − ψ = 0 (ψ in ``buffers``) into ``buffers``' iterate from the explicit Euler
     predictor y_start + dt·f_start, J at the last accepted state (t_start, y_start, f there);
     False when the iteration did not converge even with a fresh J."""
@@ -273,7 +273,7 @@ def _explicit_part(alpha, beta, history, dt, e):
 @njit(cache=True, inline="always")
 def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buffers):
     """One step of an implicit method (β₀ ≠ 0), as :meth:`MultistepIntegrator._step_impl
-    <adapters.integrators.multistep.MultistepIntegrator._step_impl>` takes it, from (q, q̇) at
+    <mbh._adapters.integrators.multistep.MultistepIntegrator._step_impl>` takes it, from (q, q̇) at
     t: the new (q, q̇), each (n,), and False when Newton's iteration failed.  ``buffers`` (q̈ at the start
     (n,), ψ, the Newton iterate and its correction (2n,) each, q̈ at the iterate (n,)) are the
     run's, overwritten."""
@@ -294,7 +294,7 @@ def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buff
 @njit(cache=True, inline="always")
 def _projected(q, v, t, projection, model, counters):
     """``direct``'s projection of the new state (q, q̇) at t (eqs. 127, 137) by
-    :func:`~adapters.inhouse.compiled._project`, ``projection`` (proj_tol, proj_max_iter, cut):
+    :func:`~mbh._adapters.inhouse.compiled._project`, ``projection`` (proj_tol, proj_max_iter, cut):
     the corrected (q, q̇), new arrays."""
     proj_tol, proj_max_iter, cut = projection
     q_new, v_new, _ = _project(q, v, t, model[ROWS], proj_tol, proj_max_iter, cut,
@@ -309,13 +309,13 @@ def run_samples(q, v, t0, dt, first, targets, method, model, stabilisation, proj
     """A fixed-step run of an implicit linear multistep method (Adams–Moulton, BDF: β₀ ≠ 0;
     the explicit ones run on :func:`run_explicit_samples`) from the state after step ``first``
     through every step index of ``targets``, keeping the state at each: the arguments and
-    results of :func:`adapters.inhouse.compiled.run_samples`, with ``method``
+    results of :func:`mbh._adapters.inhouse.compiled.run_samples`, with ``method``
     (:func:`method_arguments`) in the tableau's place; ``stabilisation`` is
-    :data:`~adapters.inhouse.compiled.PLAIN` or :data:`~adapters.inhouse.compiled.PROJECTED`,
+    :data:`~mbh._adapters.inhouse.compiled.PLAIN` or :data:`~mbh._adapters.inhouse.compiled.PROJECTED`,
     ``check_due`` and ``passage`` are not read (no partitioning, no placed passages: the
     Python path places none for multistep methods).  A Newton failure ends the run with
-    :data:`~adapters.inhouse.compiled.FAILED_NEWTON`, any other exception in a step with
-    :data:`~adapters.inhouse.compiled.FAILED_LINALG`."""
+    :data:`~mbh._adapters.inhouse.compiled.FAILED_NEWTON`, any other exception in a step with
+    :data:`~mbh._adapters.inhouse.compiled.FAILED_LINALG`."""
     n = q.shape[0]
     states = np.empty((1, 2, n))
     buffers = (np.empty(n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(n))

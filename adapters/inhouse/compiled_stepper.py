@@ -1,14 +1,14 @@
-"""The in-house stepper on the compiled path (:mod:`adapters.inhouse.compiled`): a whole run, or
+"""The in-house stepper on the compiled path (:mod:`mbh._adapters.inhouse.compiled`): a whole run, or
 for partitioning each stretch between two sample times, in a single compiled call, so no Python
 runs per step.
 
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
 rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations, and for the
-linear multistep methods (ab1–ab5, am1–am5, bdf1–bdf4: :mod:`adapters.inhouse.compiled_multistep`)
+linear multistep methods (ab1–ab5, am1–am5, bdf1–bdf4: :mod:`mbh._adapters.inhouse.compiled_multistep`)
 with ``none``, ``baumgarte`` and ``direct``, unless the method says ``loop=python``; every other
-method runs on :class:`~adapters.inhouse.driver.InhouseStepper`.
+method runs on :class:`~mbh._adapters.inhouse.driver.InhouseStepper`.
 With ``loop=auto`` (the default) or ``generated`` each stage's q̈, the projection's parts and ρ̂
-come from functions generated for the formulation (:mod:`adapters.inhouse.generated`: the same
+come from functions generated for the formulation (:mod:`mbh._adapters.inhouse.generated`: the same
 numbers, a step 3–4 times faster; :data:`LOOPS` says when ``auto`` compiles them), with
 ``loop=compiled`` from the generic kernels.
 The formulation object is built as on the Python path (its rows, gains, projection cut, split and
@@ -41,20 +41,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import compiled, compiled_multistep, generated, on_demand
-from adapters.inhouse.driver import FormulationStepper
-from adapters.inhouse.fold import Passages
-from adapters.inhouse.partition import CoordinatePartitioning
-from adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
-from adapters.inhouse.states import body_states
-from adapters.integrators import integrator_class
-from adapters.integrators.multistep import LinearMultistep
-from adapters.integrators.newton import non_convergence
-from adapters.integrators.nystrom import NystromIntegrator
-from harness.common import waits
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.base import RunFailure, RunGrid
+from mbh._adapters.inhouse import compiled, compiled_multistep, generated, on_demand
+from mbh._adapters.inhouse.driver import FormulationStepper
+from mbh._adapters.inhouse.fold import Passages
+from mbh._adapters.inhouse.partition import CoordinatePartitioning
+from mbh._adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
+from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.integrators import integrator_class
+from mbh._adapters.integrators.multistep import LinearMultistep
+from mbh._adapters.integrators.newton import non_convergence
+from mbh._adapters.integrators.nystrom import NystromIntegrator
+from mbh._harness.common import waits
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 #: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_steps`.
 COMPILED_FORMULATIONS = {NoStabilisation.name: compiled.PLAIN, Baumgarte.name: compiled.PLAIN,
@@ -101,8 +101,8 @@ class CompiledStepper(FormulationStepper):
     formulation_class : type
         One of :data:`COMPILED_FORMULATIONS`' classes.
     integrator_name : str
-        A :class:`~adapters.integrators.nystrom.NystromIntegrator` or
-        :class:`~adapters.integrators.multistep.LinearMultistep` method.
+        A :class:`~mbh._adapters.integrators.nystrom.NystromIntegrator` or
+        :class:`~mbh._adapters.integrators.multistep.LinearMultistep` method.
     integrator_params, formulation_params : dict
         Resolved parameters of each part (``divergence_limit``, ``tol`` and ``max_iter`` are the
         integrator's).
@@ -210,7 +210,7 @@ class CompiledStepper(FormulationStepper):
         """The full loop's compiled function, compiled now (or loaded) if it is not yet: inside a
         run, when the generated steps first hand a step over, that time is left out of the
         run's wall time (:attr:`untimed_s`), as it was when the loop was always loaded before
-        the run, and a compilation (a wait that is said, :mod:`harness.common.waits`) is
+        the run, and a compilation (a wait that is said, :mod:`mbh._harness.common.waits`) is
         noted."""
         if self._entry is None:
             began = time.perf_counter()

@@ -76,11 +76,11 @@ from dataclasses import dataclass, field
 import numpy as np
 import sksundae
 
-from adapters.base import RunFailure, describe
-from adapters.inhouse.constraints import ConstraintSystem
-from adapters.inhouse.dynamics import Dynamics, solve_augmented
-from adapters.inhouse.rank import full_pivot_elimination
-from harness.model.mechanism import Mechanism
+from mbh._adapters.base import RunFailure, describe
+from mbh._adapters.inhouse.constraints import ConstraintSystem
+from mbh._adapters.inhouse.dynamics import Dynamics, solve_augmented
+from mbh._adapters.inhouse.rank import full_pivot_elimination
+from mbh._harness.model.mechanism import Mechanism
 
 FORMS = ("ggl", "index3")
 JACOBIANS = ("kernels", "ida")

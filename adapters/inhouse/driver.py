@@ -1,5 +1,5 @@
 """The in-house stepper: a formulation (stabilisation strategy) integrated by one method from the
-assembled initial state, driven by the shared run loop (:meth:`adapters.base.Adapter.simulate`).
+assembled initial state, driven by the shared run loop (:meth:`mbh._adapters.base.Adapter.simulate`).
 
 Fixed-step methods are read after step round(t / dt).  Adaptive methods are read at the sample
 times: the state of the step that ends there, else the solver's dense output inside the last
@@ -16,16 +16,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.base import RunFailure, RunGrid, Stepper
-from adapters.inhouse import on_demand
-from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.fold import Passages
-from adapters.inhouse.kinematics import common_start
-from adapters.inhouse.stabilisation import Formulation
-from adapters.inhouse.states import body_states
-from adapters.integrators import RUNNING, make_integrator
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.base import RunFailure, RunGrid, Stepper
+from mbh._adapters.inhouse import on_demand
+from mbh._adapters.inhouse.constraints import layout_of
+from mbh._adapters.inhouse.fold import Passages
+from mbh._adapters.inhouse.kinematics import common_start
+from mbh._adapters.inhouse.stabilisation import Formulation
+from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.integrators import RUNNING, make_integrator
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 #: Measured first compilation of what the start and a formulation's construction call, s
 #: (2-core machine, 2026-11-29: Φ 1.8, Φ_q 4.0, γ 7.5, the rank's full pivoting 3.5, ρ̂ 2.8).
@@ -41,7 +41,7 @@ PROJECTED_SAMPLES_NOTE = ("adaptive steps with projection: states between steps 
 
 class FormulationStepper(Stepper):
     """What the in-house steppers share: the body layout, the common start
-    (:func:`~adapters.inhouse.kinematics.common_start`) and the formulation built there.
+    (:func:`~mbh._adapters.inhouse.kinematics.common_start`) and the formulation built there.
 
     Parameters
     ----------
@@ -76,7 +76,7 @@ class InhouseStepper(FormulationStepper):
     mech : Mechanism
     formulation_class : type[Formulation]
     integrator_name : str
-        A name from :func:`adapters.integrators.integrator_names`.
+        A name from :func:`mbh._adapters.integrators.integrator_names`.
     integrator_params, formulation_params : dict
         Resolved parameters of each part.
     grid : RunGrid

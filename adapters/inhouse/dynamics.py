@@ -21,15 +21,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from adapters.inhouse import kernels
-from adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_matvec,
+from mbh._adapters.inhouse import kernels
+from mbh._adapters.inhouse.banded import (BANDED_MIN_ROWS, banded_spd_solve, pattern_matvec,
                                      pattern_rmatvec)
-from adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
-from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.linalg import (_cholesky, back_substitution, certified_solve, column_gram,
+from mbh._adapters.inhouse.bodykin import PLANAR_NC, point_rate_xyz, point_xyz, rotate_xyz
+from mbh._adapters.inhouse.constraints import layout_of
+from mbh._adapters.inhouse.linalg import (_cholesky, back_substitution, certified_solve, column_gram,
                                      forward_substitution, matvec, rmatvec, skippable,
                                      truncated_solve, weighted_gram)
-from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 
 @njit(cache=True, inline="always")
@@ -41,7 +41,7 @@ def g_bar(theta):
 @njit(cache=True, inline="always")
 def _g_bar_rows(q, start):
     """The rows of Ḡ = 2Ē (Rouvinen 2003, eq. 28) of θ = q[start:start + 4], three tuples (4): the form
-    the force kernels use (tuples, not a scratch array: :mod:`adapters.inhouse.bodykin` says
+    the force kernels use (tuples, not a scratch array: :mod:`mbh._adapters.inhouse.bodykin` says
     why)."""
     t0, t1, t2, t3 = q[start], q[start + 1], q[start + 2], q[start + 3]
     return ((-2.0 * t1, 2.0 * t0, 2.0 * t3, -2.0 * t2),
@@ -171,8 +171,8 @@ def spatial_block_acceleration(q, jac, force, target, nc, masses, inertias, kind
     θᵀθ̈, so adding c θθᵀ to the block and c θ γ_θ/2 to the force leaves q̈ unchanged
     (c = 4 tr J̄ / 3, the mean of the block's other eigenvalues 4 J̄_i on the manifold).  The
     block-diagonal M' is solved body by body (:func:`_block_solve_into`) for the rows of Φ_q
-    that touch the body (``sparsity_arrays``, :attr:`~adapters.inhouse.banded.Sparsity.arrays`),
-    S = Φ_q M'⁻¹ Φ_qᵀ by :func:`~adapters.inhouse.linalg.certified_solve` (redundant rows
+    that touch the body (``sparsity_arrays``, :attr:`~mbh._adapters.inhouse.banded.Sparsity.arrays`),
+    S = Φ_q M'⁻¹ Φ_qᵀ by :func:`~mbh._adapters.inhouse.linalg.certified_solve` (redundant rows
     included: S is then singular, and the certified pivoted factorisation solves it as the
     truncated SVD would).
 
@@ -343,7 +343,7 @@ def _add_torque(out, q, nc, body, n, sign):
         out[k + 2] += sign * n[2]
         return
     # Ḡᵀ Aᵀ n: Aᵀ n = (2e₀² − 1) n + 2e (eᵀn) − 2e₀ (e × n) is the torque in body axes
-    # (Rouvinen 2003, eq. 5 in the form of adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
+    # (Rouvinen 2003, eq. 5 in the form of mbh._adapters.inhouse.bodykin, transposed; e = (θ₁, θ₂, θ₃)).
     e0, e1, e2, e3 = q[k + 3], q[k + 4], q[k + 5], q[k + 6]
     scale, along = 2.0 * e0 * e0 - 1.0, 2.0 * (e1 * n[0] + e2 * n[1] + e3 * n[2])
     local = (scale * n[0] + along * e1 - 2.0 * e0 * (e2 * n[2] - e3 * n[1]),
@@ -511,10 +511,10 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
     the lost direction grows like 1/σ while its force Φ_qᵀμ stays finite, and a plain LU of
     eq. 77 turns round-off there into acceleration spikes (the error grows as dt shrinks).
     Redundant rows (σ = 0 everywhere) need no elimination beforehand.  Where the matrix is
-    certified far from the cut (:func:`~adapters.inhouse.linalg.certified_spd_solve`, the common
+    certified far from the cut (:func:`~mbh._adapters.inhouse.linalg.certified_spd_solve`, the common
     case) a Cholesky solve replaces the SVD, and where its redundant directions are certified
     below the cut and the others above it, a pivoted one
-    (:func:`~adapters.inhouse.linalg.semidefinite_solve`); planar (diagonal) mass matrices use
+    (:func:`~mbh._adapters.inhouse.linalg.semidefinite_solve`); planar (diagonal) mass matrices use
     M⁻¹ directly.
 
     Parameters
@@ -582,7 +582,7 @@ def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
 @njit(cache=True)
 def _multipliers(reduced, residual, cut):
     """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): Cholesky (plain or
-    pivoted, :func:`~adapters.inhouse.linalg.certified_solve`) where certified, else the
+    pivoted, :func:`~mbh._adapters.inhouse.linalg.certified_solve`) where certified, else the
     truncated SVD at ``cut``, shape (m,)."""
     certified, mu = certified_solve(reduced, residual, cut)
     if not certified:
@@ -646,8 +646,8 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
     and 110; α = β = 0 is the unstabilised form) by :func:`range_space_acceleration`.
     ``constraint_args`` are :attr:`ConstraintSystem.kernel_args`, ``dynamics_args``
     :attr:`Dynamics.kernel_args`, ``sparsity_arrays`` :attr:`ConstraintSystem.sparsity`'s arrays:
-    with every row kept, planar bodies and :data:`~adapters.inhouse.banded.BANDED_MIN_ROWS` rows
-    or more, the range-space matrix is solved banded (:func:`~adapters.inhouse.banded.
+    with every row kept, planar bodies and :data:`~mbh._adapters.inhouse.banded.BANDED_MIN_ROWS` rows
+    or more, the range-space matrix is solved banded (:func:`~mbh._adapters.inhouse.banded.
     banded_spd_solve`), else by :func:`range_space_acceleration`.
     """
     every_row = rows.shape[0] == constraint_args[-1]
@@ -697,7 +697,7 @@ def acceleration_jacobian(q, v, t, alpha, beta, rows, constraint_args, dynamics_
                           sparsity_arrays, a0):
     """[∂q̈/∂q, ∂q̈/∂q̇] of :func:`index1_acceleration` at (q, q̇, t) by forward differences, shape
     (n, 2n), in one compiled call: the differences of
-    :func:`adapters.integrators.newton.first_order_jacobian` (step √ε · max(1, |y_j|)), 2n
+    :func:`mbh._adapters.integrators.newton.first_order_jacobian` (step √ε · max(1, |y_j|)), 2n
     evaluations of the fused right-hand side.  ``a0`` is q̈ at (q, q̇), shape (n,)."""
     n = q.shape[0]
     out = np.empty((n, 2 * n))

@@ -1,19 +1,19 @@
-"""The folder of generated functions (:mod:`adapters.inhouse.generated`): one entry per traced
+"""The folder of generated functions (:mod:`mbh._adapters.inhouse.generated`): one entry per traced
 source, the whole folder bounded in size, a damaged entry rebuilt.
 
-Layout, under :func:`harness.common.locations.generated_cache` (``$MBH_GENERATED_DIR``, else
+Layout, under :func:`mbh._harness.common.locations.generated_cache` (``$MBH_GENERATED_DIR``, else
 ``generated`` in the user cache)::
 
     <toolchain>/<name>/<name>.py     the source; <name> is made of its hash
     <toolchain>/<name>/__pycache__/  numba's cache of its compiled function (placed there by
-                                     harness.common.kernel_cache), and the source's bytecode
+                                     mbh._harness.common.kernel_cache), and the source's bytecode
     <toolchain>/<name>/used          present once compiled; modified at every load (last use)
     <toolchain>/<name>/lock          held by the process that compiles or loads the entry
     <toolchain>/<key>.trace          a remembered trace (:func:`remember`): which entry, or why
                                      none, the trace of inputs with digest <key> gave; modified
                                      at every read (last use)
 
-``<toolchain>`` is :func:`harness.common.kernel_cache.fingerprint` of the Python, numba and
+``<toolchain>`` is :func:`mbh._harness.common.kernel_cache.fingerprint` of the Python, numba and
 llvmlite versions: another numba finds no entry "compiled" that it would have to compile again.
 The source's text depends on the kernels it was traced from, so a kernel change makes new names.
 
@@ -40,10 +40,10 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
-from harness.common import file_lock
-from harness.common.errors import MbhError
-from harness.common.kernel_cache import fingerprint
-from harness.common.locations import generated_cache
+from mbh._harness.common import file_lock
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.kernel_cache import fingerprint
+from mbh._harness.common.locations import generated_cache
 
 #: Environment variable bounding the folder's size, in MB (10⁶ bytes).
 MAX_MB_ENV = "MBH_GENERATED_MAX_MB"
@@ -130,7 +130,7 @@ def load(name: str, source: str, announce=None) -> ModuleType:
     """Module ``name`` of ``source`` (registered in :data:`sys.modules`, where numba's cache looks
     it up), its functions compiled or loaded from numba's cache.  A damaged entry is rebuilt; the
     entry is marked used, and after a new compilation the folder is bounded (:func:`evict`).
-    One process compiles an entry while others that want it wait (:mod:`harness.common.file_lock`
+    One process compiles an entry while others that want it wait (:mod:`mbh._harness.common.file_lock`
     on the entry's :data:`LOCK`), then load it; ``announce``, a context manager, is entered around
     a compilation (an entry not marked :data:`USED`).
 

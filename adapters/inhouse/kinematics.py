@@ -10,11 +10,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
-from adapters.inhouse.rank import RankReport, rank_analysis
-from adapters.inhouse.states import coordinates
-from harness.common.errors import MbhError
-from harness.model.mechanism import Mechanism
+from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
+from mbh._adapters.inhouse.rank import RankReport, rank_analysis
+from mbh._adapters.inhouse.states import coordinates
+from mbh._harness.common.errors import MbhError
+from mbh._harness.model.mechanism import Mechanism
 
 #: Assembly stops when max |Φ| falls below this (m, rad, or dimensionless).
 ASSEMBLY_TOLERANCE = 1e-13
@@ -108,7 +108,7 @@ def assemble(mech: Mechanism, value: float | None = None, rate: float | None = N
 def common_start(mech: Mechanism) -> Assembly:
     """The harness's common start (docs/design.md, rule 3) in absolute coordinates.
 
-    Every engine starts from :func:`harness.neutral.start.initial_state`; this converts it to (q, q̇)
+    Every engine starts from :func:`mbh._harness.neutral.start.initial_state`; this converts it to (q, q̇)
     (planar angles taken on the branch of :func:`reference_coordinates`, so that the prismatic
     angle rows see no 2π) and polishes it onto the in-house joint equations: Newton–Raphson on Φ
     without the driver (usually no iteration: the start already satisfies the neutral equations
@@ -120,7 +120,7 @@ def common_start(mech: Mechanism) -> Assembly:
     InhouseAssemblyError
         When the polish does not converge (the two formulations' joint equations disagree).
     """
-    from harness.neutral.start import initial_state
+    from mbh._harness.neutral.start import initial_state
 
     layout = layout_of(mech)
     q, v = coordinates(layout, initial_state(mech))

@@ -5,9 +5,9 @@ body, so the mass matrix diag(m I, J̄) is constant and the quadratic-velocity t
 −ω̄ × J̄ω̄.  Positions stay (R, θ); θ is advanced on the unit sphere by the quaternion exponential
 θ ⊗ exp(Δπ̄ / 2) (:meth:`advance`), so the normalisation equation is not needed.  Rotations do not
 commute, so the explicit methods step in the exponential chart around the current orientation
-(:mod:`adapters.integrators.nystrom`, "Lie groups"): :meth:`increment_rate`,
+(:mod:`mbh._adapters.integrators.nystrom`, "Lie groups"): :meth:`increment_rate`,
 :meth:`chart_velocity` and :meth:`chart_acceleration` are the chart's maps of
-:mod:`adapters.integrators.so3` for the rotations and the identity for the translations.  The constraint
+:mod:`mbh._adapters.integrators.so3` for the rotations and the identity for the translations.  The constraint
 Jacobian with respect to (Ṙ, ω̄) is Φ_q T with θ̇ = ¼ Ḡᵀ ω̄ (Ḡ of Rouvinen 2003, eq. 28), and the
 acceleration right-hand side gains −Φ_θ ¼ Ḡ(θ̇)ᵀ ω̄ from differentiating that map.  Drift is held by
 Baumgarte terms (α, β; α = β = 0 gives the plain form).
@@ -20,9 +20,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.inhouse.dynamics import g_bar, solve_augmented
-from adapters.inhouse.stabilisation import Formulation
-from adapters.integrators import so3
+from mbh._adapters.inhouse.dynamics import g_bar, solve_augmented
+from mbh._adapters.inhouse.stabilisation import Formulation
+from mbh._adapters.integrators import so3
 
 
 class NewtonEuler(Formulation):
@@ -87,7 +87,7 @@ class NewtonEuler(Formulation):
 
     # -- the exponential chart of each body's rotation (Lie-group stepping) -------------------
     def _chart(self, function, dq, *rates):
-        """Apply an :mod:`~adapters.integrators.so3` map to the rotation rows, identity elsewhere."""
+        """Apply an :mod:`~mbh._adapters.integrators.so3` map to the rotation rows, identity elsewhere."""
         out = np.array(rates[-1], dtype=float).reshape(-1, 6)
         rotation = self._blocks(dq, 6)[:, 3:]
         out[:, 3:] = function(rotation, *(self._blocks(r, 6)[:, 3:] for r in rates))

@@ -1,9 +1,9 @@
 """The compiled loops, made when a run first needs them: once per machine and code, by one
-process while the others wait (:mod:`harness.common.file_lock`), and announced when that takes
-long (:mod:`harness.common.waits`).
+process while the others wait (:mod:`mbh._harness.common.file_lock`), and announced when that takes
+long (:mod:`mbh._harness.common.waits`).
 
 numba compiles a function at its first call for the argument types of that call, or loads it
-from its cache (:mod:`harness.common.kernel_cache`).  The stepper asks here instead: for the
+from its cache (:mod:`mbh._harness.common.kernel_cache`).  The stepper asks here instead: for the
 compiled function of a loop (:func:`entry`), and beforehand whether that loop is ready on this
 machine (:func:`is_ready`), so that a run can take a path that compiles in seconds (the generated
 steps alone) rather than wait a minute or more for the kernels' loop it may never need
@@ -15,8 +15,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 
-from harness.common import file_lock, waits
-from harness.common.kernel_cache import kernel_folder
+from mbh._harness.common import file_lock, waits
+from mbh._harness.common.kernel_cache import kernel_folder
 
 #: What the announcement of a loop's compilation says to expect (:func:`entry`), s: the generated steps' loop
 #: compiled in 1.9 s, the one-step methods' full loop from an empty cache in ~160 s (its
@@ -53,7 +53,7 @@ def entry(dispatcher, args: tuple, what: str, estimate_s: float):
     Compiled, or loaded from numba's cache, now if needed; a compilation is announced as
     ``what``, expected to take ``estimate_s``.  A second process that wants the same loop meanwhile
     waits for the first (the loop's lock here, so that it does not announce a compilation it will
-    not make; the kernels' own locks, :mod:`harness.common.kernel_cache`) and then loads it.
+    not make; the kernels' own locks, :mod:`mbh._harness.common.kernel_cache`) and then loads it.
     """
     types = _types(dispatcher, args)
     overload = dispatcher.overloads.get(types)
@@ -73,7 +73,7 @@ def entry(dispatcher, args: tuple, what: str, estimate_s: float):
 
 @contextlib.contextmanager
 def first_use(name: str, what: str, estimate_s: float):
-    """Announce the block as compiling ``what`` (:mod:`harness.common.waits`, with
+    """Announce the block as compiling ``what`` (:mod:`mbh._harness.common.waits`, with
     ``estimate_s``) unless a block of this ``name`` ended well before with this code on this
     machine: for the kernels called from Python (numba compiles each at its first call, so
     there is no loop to ask for)."""

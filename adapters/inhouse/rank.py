@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
+from mbh._harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
 
 #: Pivots below this fraction of the largest |entry| count as zero.
 RANK_TOLERANCE = 1e-9

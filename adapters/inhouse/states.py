@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.inhouse.constraints import Layout
-from harness.model.trajectory import BodyStates
+from mbh._adapters.inhouse.constraints import Layout
+from mbh._harness.model.trajectory import BodyStates
 
 
 def _e_matrix(theta: np.ndarray) -> np.ndarray:

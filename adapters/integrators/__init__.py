@@ -27,7 +27,7 @@ lsoda
 
 from __future__ import annotations
 
-from adapters.integrators.base import (
+from mbh._adapters.integrators.base import (
     DIVERGED,
     FAILED,
     RUNNING,
@@ -35,14 +35,14 @@ from adapters.integrators.base import (
     SecondOrderProblem,
     SecondOrderSystem,
 )
-from adapters.integrators.multistep import (
+from mbh._adapters.integrators.multistep import (
     ABM4,
     ADAMS_BASHFORTH_METHODS,
     ADAMS_MOULTON_METHODS,
     GEAR_METHODS,
 )
-from adapters.integrators.nystrom import RK4, RK5, RK8, RKN4, Euler, Heun, SymplecticEuler
-from adapters.integrators.scipy_solvers import SCIPY_METHODS
+from mbh._adapters.integrators.nystrom import RK4, RK5, RK8, RKN4, Euler, Heun, SymplecticEuler
+from mbh._adapters.integrators.scipy_solvers import SCIPY_METHODS
 
 __all__ = [
     "DIVERGED", "FAILED", "RUNNING", "INTEGRATORS", "Integrator", "SecondOrderProblem",

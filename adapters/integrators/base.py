@@ -132,7 +132,7 @@ class Integrator:
         evaluations, LU factorisations, Newton iterations, completed steps.
     """
 
-    #: User-facing name (key of the registry in :mod:`adapters.integrators`).
+    #: User-facing name (key of the registry in :mod:`mbh._adapters.integrators`).
     name: str = ""
     #: Order of accuracy (for adaptive methods: of the propagated solution).
     order: int = 0

@@ -29,9 +29,9 @@ from collections import deque
 
 import numpy as np
 
-from adapters.integrators.base import Integrator
-from adapters.integrators.newton import NewtonSolver
-from adapters.integrators.nystrom import RK4, nystrom_step
+from mbh._adapters.integrators.base import Integrator
+from mbh._adapters.integrators.newton import NewtonSolver
+from mbh._adapters.integrators.nystrom import RK4, nystrom_step
 
 #: Table 2: k → (denominator, (β_1 … β_k)) for y_{n+1} = y_n + h/D Σ β_j f_{n+1−j}.
 ADAMS_BASHFORTH = {

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg import lu_factor, lu_solve
 
-from adapters.integrators.base import StepFailure
+from mbh._adapters.integrators.base import StepFailure
 
 #: An iteration whose correction shrinks by less than this factor is "slow": the Jacobian is
 #: refreshed (if it was not computed in this step already) and the step restarted.
@@ -69,7 +69,7 @@ def problem_jacobian(owner, t, y, a0):
 
 def non_convergence(max_iter: int, tol: float, t: float) -> str:
     """Why a step failed when Newton's iteration toward t (s) did not converge, as both stepping
-    paths word it (:class:`NewtonSolver`, :mod:`adapters.inhouse.compiled_multistep`)."""
+    paths word it (:class:`NewtonSolver`, :mod:`mbh._adapters.inhouse.compiled_multistep`)."""
     return f"Newton iteration did not converge in {max_iter} iterations to tol={tol:g} at t={t:.6g}"
 
 

@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.integrate import BDF, DOP853, LSODA, RK45, Radau
 
-from adapters.integrators.base import Integrator, StepFailure
-from adapters.integrators.newton import problem_jacobian
+from mbh._adapters.integrators.base import Integrator, StepFailure
+from mbh._adapters.integrators.newton import problem_jacobian
 
 #: SciPy solvers that take a Jacobian (``jac``).
 IMPLICIT_SOLVERS = (Radau, BDF, LSODA)
@@ -41,7 +41,7 @@ class ScipyIntegrator(Integrator):
     Parameters
     ----------
     problem, t0, q0, v0, dt
-        As :class:`~adapters.integrators.base.Integrator`; ``dt`` is the first step.
+        As :class:`~mbh._adapters.integrators.base.Integrator`; ``dt`` is the first step.
     rtol, atol : float
         Relative and absolute tolerances of the local error (defaults 1e-6, 1e-9).
     max_step : float

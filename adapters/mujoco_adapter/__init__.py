@@ -8,7 +8,7 @@ The neutral mechanism becomes an MJCF model built through ``mujoco.MjSpec``.  Mo
 loop).
 """
 
-from adapters.mujoco_adapter.adapter import MujocoAdapter, export_mjcf
-from adapters.mujoco_adapter.build import MujocoModel, build_model, closure_equations
+from mbh._adapters.mujoco_adapter.adapter import MujocoAdapter, export_mjcf
+from mbh._adapters.mujoco_adapter.build import MujocoModel, build_model, closure_equations
 
 __all__ = ["MujocoAdapter", "MujocoModel", "build_model", "closure_equations", "export_mjcf"]

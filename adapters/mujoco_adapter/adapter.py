@@ -1,6 +1,6 @@
 """The MuJoCo adapter: the harness's contract over :mod:`.build`, :mod:`.state`, :mod:`.methods`
 and :mod:`.stepping`, the engine-specific stepper driven by the shared run loop
-(:meth:`adapters.base.Adapter.simulate`), and :func:`export_mjcf`.
+(:meth:`mbh._adapters.base.Adapter.simulate`), and :func:`export_mjcf`.
 """
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ import time
 import mujoco
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
-from adapters.mujoco_adapter.build import MujocoModel, build_model
-from adapters.mujoco_adapter.methods import STAGES, _check_params, _configured, _method_specs
-from adapters.mujoco_adapter.state import _body_states
-from adapters.mujoco_adapter.state import _start as _set_start
-from adapters.mujoco_adapter.stepping import Stepping
-from harness.neutral.start import initial_state
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
+from mbh._adapters.mujoco_adapter.build import MujocoModel, build_model
+from mbh._adapters.mujoco_adapter.methods import STAGES, _check_params, _configured, _method_specs
+from mbh._adapters.mujoco_adapter.state import _body_states
+from mbh._adapters.mujoco_adapter.state import _start as _set_start
+from mbh._adapters.mujoco_adapter.stepping import Stepping
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 
 def _notes(built: MujocoModel, model: mujoco.MjModel) -> list[str]:
@@ -96,7 +96,7 @@ class _MujocoStepper(Stepper):
     """One MuJoCo run: the configured model and its data at the harness's initial state.
 
     Samples are read after step ``round(t / dt)``, the steps between two samples taken in one
-    call (:class:`~adapters.mujoco_adapter.stepping.Stepping`); a bad-qpos/qvel/qacc warning ends
+    call (:class:`~mbh._adapters.mujoco_adapter.stepping.Stepping`); a bad-qpos/qvel/qacc warning ends
     the run as ``diverged`` with the state before the step that raised it as the last good one
     (MuJoCo itself would reset and carry on).
     """

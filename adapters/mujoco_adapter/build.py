@@ -1,9 +1,9 @@
-"""Translate a neutral :class:`~harness.model.mechanism.Mechanism` into a MuJoCo specification (``MjSpec``)
+"""Translate a neutral :class:`~mbh._harness.model.mechanism.Mechanism` into a MuJoCo specification (``MjSpec``)
 and compile it, with every faithfulness switch set explicitly.
 
 Model
 -----
-* The bodies form the spanning tree chosen by :func:`harness.model.topology.spanning_tree` with
+* The bodies form the spanning tree chosen by :func:`mbh._harness.model.topology.spanning_tree` with
   MuJoCo's closure costs (:func:`closure_equations`).  Each tree joint becomes hinge / slide /
   ball joints inside the child body, no dummy bodies: revolute = hinge, prismatic and
   translational = slide, cylindrical = slide + hinge, universal = two hinges (the parent-fixed
@@ -32,10 +32,10 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.base import UNCLOSABLE, UnsupportedCase
-from adapters.mujoco_adapter.loads import _loads, _Loads
-from harness.model.mechanism import GROUND, Joint, Mechanism, SpringDamper
-from harness.model.topology import SpanningTree, spanning_tree
+from mbh._adapters.base import UNCLOSABLE, UnsupportedCase
+from mbh._adapters.mujoco_adapter.loads import _loads, _Loads
+from mbh._harness.model.mechanism import GROUND, Joint, Mechanism, SpringDamper
+from mbh._harness.model.topology import SpanningTree, spanning_tree
 
 #: Smallest principal moment MuJoCo is given, relative to the body's largest, or for a point mass
 #: (no moment at all) to its moment m r² about its farthest joint point (MuJoCo refuses a

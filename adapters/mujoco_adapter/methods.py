@@ -17,7 +17,7 @@ import copy
 
 import mujoco
 
-from adapters.base import MethodSpec
+from mbh._adapters.base import MethodSpec
 
 #: Integrator names accepted by the ``integrator`` parameter.
 INTEGRATORS = {

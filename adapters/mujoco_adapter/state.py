@@ -11,9 +11,9 @@ import mujoco
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.mujoco_adapter.build import MujocoModel, _quat
-from harness.model.mechanism import GROUND
-from harness.model.trajectory import BodyStates
+from mbh._adapters.mujoco_adapter.build import MujocoModel, _quat
+from mbh._harness.model.mechanism import GROUND
+from mbh._harness.model.trajectory import BodyStates
 
 #: Largest allowed difference between the harness's initial state and MuJoCo's version of it.
 INITIAL_TOLERANCE = 1e-12

@@ -11,7 +11,7 @@ from collections.abc import Callable
 import mujoco
 import numpy as np
 
-from adapters.mujoco_adapter.loads import _Loads, _moving_wrenches
+from mbh._adapters.mujoco_adapter.loads import _Loads, _moving_wrenches
 
 #: Warnings that mean the state went bad (MuJoCo then resets the simulation and carries on):
 #: bad qpos, bad qvel, bad qacc, consecutive in ``mjtWarning``, so one slice of the counters.
@@ -57,7 +57,7 @@ class Stepping:
     """The steps of one run and the divergence check after each chunk of them.
 
     A chunk runs as :attr:`run` (also the bare loop of
-    :meth:`adapters.mujoco_adapter.adapter.MujocoAdapter.bare_loop`); afterwards the caller asks
+    :meth:`mbh._adapters.mujoco_adapter.adapter.MujocoAdapter.bare_loop`); afterwards the caller asks
     :meth:`diverged` (the counters are zeroed at the start, so any count means a divergence).
     Only when one fired is the run replayed (:meth:`first_bad_step`) — from the start state saved
     here, to the chunk's start in one call, then step by step — to find the step: MuJoCo is

@@ -5,6 +5,6 @@ joint coordinates), :mod:`.dynamics` (the constrained equations of motion as an 
 problem), :mod:`.adapter` (methods and the stepping loop).
 """
 
-from adapters.pinocchio_adapter.adapter import PinocchioAdapter
+from mbh._adapters.pinocchio_adapter.adapter import PinocchioAdapter
 
 __all__ = ["PinocchioAdapter"]

@@ -2,7 +2,7 @@
 :mod:`.dynamics`.
 
 Pinocchio computes constrained accelerations but has no time integrator; the harness's own
-integrators (:mod:`adapters.integrators`) drive it, the configuration integrated on its
+integrators (:mod:`mbh._adapters.integrators`) drive it, the configuration integrated on its
 manifold by ``pin.integrate``.  A method is an integrator × constraint-solver settings (Baumgarte
 gains, proximal ``mu``, ``max_iter``, ``accuracy``) × projection on/off; every method takes every
 parameter, only the defaults differ.
@@ -14,16 +14,16 @@ import time
 
 import pinocchio as pin
 
-from adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
-from adapters.integrators import RUNNING, integrator_names, make_integrator
-from adapters.integrators.nystrom import NystromIntegrator, step_rule
-from adapters.pinocchio_adapter.build import PinocchioModel, build_model
-from adapters.pinocchio_adapter.dynamics import SolverSettings
-from adapters.pinocchio_adapter.state import body_states, joint_state
-from adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
-from harness.neutral.start import initial_state
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
+from mbh._adapters.integrators import RUNNING, integrator_names, make_integrator
+from mbh._adapters.integrators.nystrom import NystromIntegrator, step_rule
+from mbh._adapters.pinocchio_adapter.build import PinocchioModel, build_model
+from mbh._adapters.pinocchio_adapter.dynamics import SolverSettings
+from mbh._adapters.pinocchio_adapter.state import body_states, joint_state
+from mbh._adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 _PIN_DEFAULTS = pin.ProximalSettings()
 #: Parameters every method takes, at Pinocchio's own defaults (``ProximalSettings()`` as
@@ -128,7 +128,7 @@ class PinocchioAdapter(Adapter):
 
 
 class _PinocchioStepper(Stepper):
-    """One integrator of :mod:`adapters.integrators` driving Pinocchio's constrained dynamics
+    """One integrator of :mod:`mbh._adapters.integrators` driving Pinocchio's constrained dynamics
     from the harness's assembled start, converted to joint coordinates.
 
     Samples are read after step ``round(t / dt)``.  The integrator's own check (non-finite or

@@ -1,4 +1,4 @@
-"""Translate a neutral :class:`~harness.model.mechanism.Mechanism` into a Pinocchio model.
+"""Translate a neutral :class:`~mbh._harness.model.mechanism.Mechanism` into a Pinocchio model.
 
 The spanning tree of the mechanism becomes Pinocchio's kinematic tree in joint coordinates; every
 cut joint becomes loop-closure constraints of Pinocchio's constraint-dynamics API
@@ -32,9 +32,9 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from adapters.base import UNCLOSABLE, UnsupportedCase
-from harness.model.mechanism import GROUND, Body, Joint, JointActuation, Mechanism
-from harness.model.topology import SpanningTree, spanning_tree
+from mbh._adapters.base import UNCLOSABLE, UnsupportedCase
+from mbh._harness.model.mechanism import GROUND, Body, Joint, JointActuation, Mechanism
+from mbh._harness.model.topology import SpanningTree, spanning_tree
 
 #: Distance (m) between the two point constraints that close a spatial revolute.
 AXIS_LEVER = 1.0
@@ -76,7 +76,7 @@ class PinocchioModel:
 
 def closure_equations(mech: Mechanism, joint: Joint) -> int:
     """Constraint equations Pinocchio needs to close a loop cut at ``joint``
-    (:data:`adapters.base.UNCLOSABLE`).
+    (:data:`mbh._adapters.base.UNCLOSABLE`).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """The equations of motion of a :class:`PinocchioModel` as a second-order problem.
 
-:class:`ConstrainedProblem` implements the protocol of :mod:`adapters.integrators`:
+:class:`ConstrainedProblem` implements the protocol of :mod:`mbh._adapters.integrators`:
 ``acceleration`` calls ``pin.constraintDynamics`` (tree dynamics with the loop closures, solved by
 Pinocchio's proximal method with its Baumgarte corrector), ``advance`` is ``pin.integrate`` (the
 configuration stays on its manifold; :mod:`.stepping` adds the dexp⁻¹ map for trees with
@@ -29,10 +29,10 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
-from adapters.integrators.base import StepFailure
-from adapters.pinocchio_adapter.build import PinocchioModel
-from adapters.pinocchio_adapter.state import frame_jacobian
-from harness.model.mechanism import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
+from mbh._adapters.integrators.base import StepFailure
+from mbh._adapters.pinocchio_adapter.build import PinocchioModel
+from mbh._adapters.pinocchio_adapter.state import frame_jacobian
+from mbh._harness.model.mechanism import GROUND, BodyForce, BodyTorque, JointActuation, SpringDamper
 
 
 @dataclass(frozen=True)
@@ -163,7 +163,7 @@ class ConstrainedProblem:
     def counted_acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
         """:meth:`engine_acceleration` with the cost counters (calls, proximal iterations, the
         largest relative residual) and no checks, shape (nv,): the right-hand side of the
-        adapter's unchecked steps (:meth:`~adapters.integrators.nystrom.NystromIntegrator.
+        adapter's unchecked steps (:meth:`~mbh._adapters.integrators.nystrom.NystromIntegrator.
         steps_unchecked`), whose failing steps :meth:`acceleration` takes again."""
         a = self.engine_acceleration(t, q, v)
         prox = self.prox

@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from adapters.pinocchio_adapter.build import PinocchioModel
-from harness.model.trajectory import BodyStates
+from mbh._adapters.pinocchio_adapter.build import PinocchioModel
+from mbh._harness.model.trajectory import BodyStates
 
 #: Pose error (m, rad) at which the configuration solve stops.  Measured floor on 6200 generated
-#: mechanisms (harness.testing.strategies, sizes 1–3.6 m): at most 9.0e-16, so 11× margin.
+#: mechanisms (mbh._harness.testing.strategies, sizes 1–3.6 m): at most 9.0e-16, so 11× margin.
 POSE_TOL = 1e-14
 #: Gauss–Newton iterations allowed for the configuration solve.
 POSE_MAX_ITER = 50

@@ -5,7 +5,7 @@ Pinocchio's velocity ``v`` of a spherical, free-flyer or planar joint is a tange
 (SO(3), SE(3), SE(2)).  These groups do not commute, so a Runge–Kutta method whose stages combine
 velocities at different configurations loses its order (to 2) unless each stage velocity V_i is
 mapped to the rate of the increment, k_i = dexp⁻¹_{Θ_i}(V_i) (Runge–Kutta–Munthe-Kaas,
-:mod:`adapters.integrators.nystrom`, "Lie groups").  Pinocchio gives that map exactly:
+:mod:`mbh._adapters.integrators.nystrom`, "Lie groups").  Pinocchio gives that map exactly:
 ``pin.dIntegrate(model, q, dq, ARG1)`` is the Jacobian of q ⊕ dq with respect to dq, expressed
 in the tangent space at q ⊕ dq, so k solves ``dIntegrate · k = V``.
 
@@ -25,11 +25,11 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from adapters.base import UnsupportedCase
-from adapters.integrators import integrator_class
-from adapters.integrators.nystrom import NystromIntegrator, step_rule
-from adapters.pinocchio_adapter.build import PinocchioModel
-from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
+from mbh._adapters.base import UnsupportedCase
+from mbh._adapters.integrators import integrator_class
+from mbh._adapters.integrators.nystrom import NystromIntegrator, step_rule
+from mbh._adapters.pinocchio_adapter.build import PinocchioModel
+from mbh._adapters.pinocchio_adapter.dynamics import ConstrainedProblem, SolverSettings
 
 #: Joint models whose configuration group is not commutative (SO(3), SE(3), SE(2)).  The
 #: Euler-angle ``JointModelSphericalZYX`` (a vector space) matches too, which is harmless: its
@@ -41,7 +41,7 @@ class LieGroupProblem(ConstrainedProblem):
     """:class:`ConstrainedProblem` on a non-commutative configuration group.
 
     Adds :meth:`increment_rate`, with which the explicit Runge–Kutta methods of
-    :mod:`adapters.integrators` step by Runge–Kutta–Munthe-Kaas.
+    :mod:`mbh._adapters.integrators` step by Runge–Kutta–Munthe-Kaas.
     """
 
     def increment_rate(self, q: np.ndarray, dq: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -71,7 +71,7 @@ def constrained_problem(pm: PinocchioModel, settings: SolverSettings) -> Constra
 
 def bare_rule(problem: ConstrainedProblem, integrator: str) -> tuple:
     """The step rule the integrator ``integrator`` takes on ``problem``
-    (:func:`~adapters.integrators.nystrom.step_rule`), its stages calling Pinocchio directly
+    (:func:`~mbh._adapters.integrators.nystrom.step_rule`), its stages calling Pinocchio directly
     (:meth:`ConstrainedProblem.engine_acceleration`), for :func:`bare_steps`.
 
     Returns

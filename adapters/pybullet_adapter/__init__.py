@@ -7,9 +7,9 @@ coordinates), :mod:`.world` (a live, faithful Bullet world: :func:`bullet_world`
 (the loads re-applied before every step), :mod:`.adapter` (methods and the stepping loop).
 """
 
-from adapters.pybullet_adapter.adapter import PybulletAdapter
-from adapters.pybullet_adapter.build import PybulletModel, build_model, closure_equations
-from adapters.pybullet_adapter.world import BulletWorld, bullet_world
+from mbh._adapters.pybullet_adapter.adapter import PybulletAdapter
+from mbh._adapters.pybullet_adapter.build import PybulletModel, build_model, closure_equations
+from mbh._adapters.pybullet_adapter.world import BulletWorld, bullet_world
 
 __all__ = ["BulletWorld", "PybulletAdapter", "PybulletModel", "build_model", "bullet_world",
            "closure_equations"]

@@ -1,5 +1,5 @@
 """The PyBullet adapter: its methods (solver settings) and its stepper, driven by the shared run
-loop (:meth:`adapters.base.Adapter.simulate`), with Bullet's extra divergence check.
+loop (:meth:`mbh._adapters.base.Adapter.simulate`), with Bullet's extra divergence check.
 """
 
 from __future__ import annotations
@@ -9,18 +9,18 @@ import time
 
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec, RunGrid, Stepper
-from adapters.pybullet_adapter.build import PybulletModel, build_model
-from adapters.pybullet_adapter.loads import _loaded_steps
-from adapters.pybullet_adapter.quiet import pybullet
-from adapters.pybullet_adapter.state import _read_states
-from adapters.pybullet_adapter.world import bullet_world
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.base import Adapter, MethodSpec, RunGrid, Stepper
+from mbh._adapters.pybullet_adapter.build import PybulletModel, build_model
+from mbh._adapters.pybullet_adapter.loads import _loaded_steps
+from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._adapters.pybullet_adapter.state import _read_states
+from mbh._adapters.pybullet_adapter.world import bullet_world
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 #: A run has diverged when a centre of mass leaves a ball this many times the mechanism's size,
 #: or a speed exceeds this many times the size per second (on top of the common check of
-#: :func:`adapters.base.divergence_reason`: non-finite or beyond 1e8).  1e3 cut physical runs:
+#: :func:`mbh._adapters.base.divergence_reason`: non-finite or beyond 1e8).  1e3 cut physical runs:
 #: Andrews' squeezer (size 0.2 m, so 1e3 rad/s) really spins its crank at 1.1e3 rad/s; an
 #: unstable Bullet run grows exponentially and passes 1e5 a few steps after 1e3.
 _DIVERGED_SCALE = 1e5
@@ -58,7 +58,7 @@ class _BulletStepper(Stepper):
     ----------
     take_steps : callable
         ``take_steps(count)`` takes ``count`` steps with their loads and no checks
-        (:func:`~adapters.pybullet_adapter.loads._loaded_steps`); divergence is checked on the
+        (:func:`~mbh._adapters.pybullet_adapter.loads._loaded_steps`); divergence is checked on the
         samples (:meth:`divergence`).
     """
 

@@ -1,4 +1,4 @@
-"""Lay out a neutral :class:`~harness.model.mechanism.Mechanism` as a Bullet multibody: spanning tree, links,
+"""Lay out a neutral :class:`~mbh._harness.model.mechanism.Mechanism` as a Bullet multibody: spanning tree, links,
 tree joints and cut joints, collected in a :class:`PybulletModel` (no Bullet client is involved).
 
 Model
@@ -7,7 +7,7 @@ Model
   frame* sits at its tree joint's point and is parallel to the world in the reference
   configuration; its inertial (centre-of-mass) frame is the body's principal frame.  Joint
   coordinate zero is therefore the scenario's reference configuration.
-* Tree joints (from :func:`harness.model.topology.spanning_tree`) map to Bullet joints: revolute →
+* Tree joints (from :func:`mbh._harness.model.topology.spanning_tree`) map to Bullet joints: revolute →
   ``JOINT_REVOLUTE``; prismatic and translational → ``JOINT_PRISMATIC`` (which also locks rotation);
   spherical → ``JOINT_SPHERICAL``.  Bullet's multibody has no universal or cylindrical joint: each is
   built as two single-degree-of-freedom joints through one massless connector link (revolute +
@@ -15,7 +15,7 @@ Model
   notes say so.
 * Cut joints are closed with user constraints: ``JOINT_POINT2POINT`` (3 equations) for spherical
   cuts and for planar revolute cuts (1 redundant equation, recorded in the notes).  Other cut types
-  are :class:`~adapters.base.UnsupportedCase`.
+  are :class:`~mbh._adapters.base.UnsupportedCase`.
 """
 
 from __future__ import annotations
@@ -24,10 +24,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.base import UNCLOSABLE, UnsupportedCase
-from adapters.pybullet_adapter.quiet import pybullet
-from harness.model.mechanism import GROUND, Joint, Mechanism
-from harness.model.topology import SpanningTree, spanning_tree
+from mbh._adapters.base import UNCLOSABLE, UnsupportedCase
+from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._harness.model.mechanism import GROUND, Joint, Mechanism
+from mbh._harness.model.topology import SpanningTree, spanning_tree
 
 #: Equations of one ``JOINT_POINT2POINT`` user constraint.
 _POINT2POINT_EQUATIONS = 3
@@ -97,7 +97,7 @@ class PybulletModel:
     links : tuple of _Link
         Bullet links in creation order: depth-first pre-order, the order ``createMultiBody``
         re-sorts its links into, so a link's index here is its Bullet link index (checked by
-        :func:`~adapters.pybullet_adapter.world.bullet_world` against the link names it reads
+        :func:`~mbh._adapters.pybullet_adapter.world.bullet_world` against the link names it reads
         back).
     body_links : tuple of int
         Bullet link index of each body (declaration order).
@@ -126,7 +126,7 @@ class PybulletModel:
 
 def closure_equations(mech: Mechanism, joint: Joint) -> int:
     """Constraint equations Bullet needs to close a loop cut at ``joint``
-    (:data:`adapters.base.UNCLOSABLE`).
+    (:data:`mbh._adapters.base.UNCLOSABLE`).
 
     Spherical cuts and planar revolute cuts take one point-to-point constraint (3 equations);
     Bullet offers no multibody constraint for the other joint types (:data:`UNCLOSABLE`).

@@ -13,11 +13,11 @@ from collections.abc import Callable
 
 import numpy as np
 
-from adapters.pybullet_adapter.build import PybulletModel
-from adapters.pybullet_adapter.quiet import pybullet
-from adapters.pybullet_adapter.state import _link_poses, _Pose, _poses, _read_states
-from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
-from harness.model.trajectory import BodyStates
+from mbh._adapters.pybullet_adapter.build import PybulletModel
+from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._adapters.pybullet_adapter.state import _link_poses, _Pose, _poses, _read_states
+from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.trajectory import BodyStates
 
 
 def _tree_actuation(model: PybulletModel) -> list[tuple[int, float]]:
@@ -42,7 +42,7 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def _body_wrenches(model: PybulletModel, states: BodyStates | dict[int, _Pose]) -> np.ndarray:
     """World force and torque about the centre of mass on each body, shape (n_bodies, 2, 3), from
-    the body states or their poses (:func:`~adapters.pybullet_adapter.state._link_poses`)."""
+    the body states or their poses (:func:`~mbh._adapters.pybullet_adapter.state._link_poses`)."""
     mech = model.mechanism
     poses = states if isinstance(states, dict) else _poses(mech, states)
     wrench = np.zeros((len(mech.bodies) + 1, 2, 3))  # last row: ground, discarded

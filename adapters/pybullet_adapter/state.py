@@ -17,10 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from adapters.pybullet_adapter.build import PybulletModel, _TreeJoint
-from adapters.pybullet_adapter.quiet import pybullet
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import BodyStates
+from mbh._adapters.pybullet_adapter.build import PybulletModel, _TreeJoint
+from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import BodyStates
 
 # ----------------------------------------------------------------------------------------------
 # Kinematics shared by the state conversion and the loads

@@ -1,4 +1,4 @@
-"""A live Bullet world of a :class:`~adapters.pybullet_adapter.build.PybulletModel`: a fresh DIRECT
+"""A live Bullet world of a :class:`~mbh._adapters.pybullet_adapter.build.PybulletModel`: a fresh DIRECT
 client with the method's settings, the multibody, the cut-joint constraints and the faithfulness
 switches, at the harness's initial state (:func:`bullet_world`).
 
@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.pybullet_adapter.build import PybulletModel, _Link
-from adapters.pybullet_adapter.quiet import _quiet_output, pybullet
-from adapters.pybullet_adapter.state import _quat_xyzw, _reset_state
-from harness.neutral.start import initial_state
+from mbh._adapters.pybullet_adapter.build import PybulletModel, _Link
+from mbh._adapters.pybullet_adapter.quiet import _quiet_output, pybullet
+from mbh._adapters.pybullet_adapter.state import _quat_xyzw, _reset_state
+from mbh._harness.neutral.start import initial_state
 
 #: Stand-in for "no limit" in Bullet settings that take a finite number (N, N·m, rad/s, m/s).
 _HUGE = 1e30
@@ -65,7 +65,7 @@ def _check_link_order(model: PybulletModel, uid: int, client: int) -> None:
     """Read every link's name back from Bullet and require link ``i`` to be created link ``i``.
 
     ``createMultiBody`` names the link created at position ``k`` (0-based) ``link{k + 1}`` and
-    re-sorts links depth-first; :func:`~adapters.pybullet_adapter.build.build_model` creates them
+    re-sorts links depth-first; :func:`~mbh._adapters.pybullet_adapter.build.build_model` creates them
     in that order, so the read-back names must run ``link1, link2, …``.
 
     Raises

@@ -12,17 +12,17 @@ import re
 import subprocess
 from pathlib import Path
 
-from harness.common.locations import checkout
+from mbh._harness.common.locations import ADAPTERS_FOLDER, CODE_ROOT, HARNESS_FOLDER, checkout
 
 #: Packages whose versions every manifest records.
 RECORDED_PACKAGES = ("numpy", "scipy", "pandas", "pyarrow", "mujoco", "pin", "exudyn",
                      "pybullet", "scikit-sundae", "numba")
 
-#: The folder holding the harness's packages (a checkout, or site-packages when installed).
-_REPO = Path(__file__).resolve().parents[2]
-#: The project's packages whose code computes a case's row (the engines' calls, the measuring
-#: stick, the metrics).
-COMPUTING_PACKAGES = ("harness", "adapters")
+#: The folder holding the harness's code folders (a checkout, or the installed mbh package).
+_REPO = CODE_ROOT
+#: The project's code folders whose code computes a case's row (the engines' calls, the measuring
+#: stick, the metrics), relative to :data:`_REPO`.
+COMPUTING_PACKAGES = (HARNESS_FOLDER.name, ADAPTERS_FOLDER.name)
 
 
 def _git(*args: str) -> str | None:

@@ -1,6 +1,6 @@
 """Files read once by the warm template and kept in memory for the cases forked from it.
 
-Each case's process is forked from the warm template (:mod:`harness.run.warm`), and a case's first
+Each case's process is forked from the warm template (:mod:`mbh._harness.run.warm`), and a case's first
 call of anything costs it the copy-on-write faults of the pages it touches (~3.5 µs each on the
 2-core development machine): parsing a scenario file took a forked case ~5 ms, decompressing its
 reference 4–23 ms.  The template reads the campaign's scenario and reference files inside

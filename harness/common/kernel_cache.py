@@ -7,16 +7,16 @@ old code after they change (and a run would crash or compute the old numbers).  
 puts :class:`KernelCacheLocator` first among numba's cache locators, which places
 
 * the cache of every function defined in :data:`KERNEL_PACKAGES` in :func:`kernel_folder`:
-  ``numba/<fingerprint>`` in the user cache (:func:`harness.common.locations.user_cache`), the
+  ``numba/<fingerprint>`` in the user cache (:func:`mbh._harness.common.locations.user_cache`), the
   fingerprint (:func:`fingerprint`) digesting the source of every module of those packages that
   uses numba (:func:`kernel_sources`) and the Python, numba and llvmlite versions.  An edit to any of them, or another numba, makes a new
   folder, compiled afresh (minutes, once); going back to the old code finds the old folder.  The
   :data:`KEEP` folders used last stay, older ones are removed;
-* the cache of a generated function (under :func:`harness.common.locations.generated_cache`)
-  beside its source, so that an entry of :mod:`adapters.inhouse.generated_store` is one folder.
+* the cache of a generated function (under :func:`mbh._harness.common.locations.generated_cache`)
+  beside its source, so that an entry of :mod:`mbh._adapters.inhouse.generated_store` is one folder.
 
 A kernel is compiled by one process at a time: a process that misses it in the cache takes the
-kernel's lock file (``locks/`` in the fingerprint folder, :mod:`harness.common.file_lock`) and
+kernel's lock file (``locks/`` in the fingerprint folder, :mod:`mbh._harness.common.file_lock`) and
 looks again, so a second process waits for the first and loads what it saved instead of
 compiling it too (pytest-xdist's workers, a campaign's cases, two terminals).
 
@@ -48,12 +48,13 @@ import llvmlite
 import numba
 from numba.core import caching, event
 
-from harness.common import file_lock
-from harness.common.locations import generated_cache, user_cache
+from mbh._harness.common import file_lock
+from mbh._harness.common.locations import (ADAPTERS_FOLDER, CODE_ROOT, HARNESS_FOLDER,
+                                           generated_cache, user_cache)
 
-_ROOT = Path(__file__).resolve().parents[2]
+_ROOT = CODE_ROOT
 #: The packages whose modules define cached kernels (``@njit(cache=True)``, ``@cfunc``).
-KERNEL_PACKAGES = (_ROOT / "adapters" / "inhouse", _ROOT / "harness" / "neutral")
+KERNEL_PACKAGES = (ADAPTERS_FOLDER / "inhouse", HARNESS_FOLDER / "neutral")
 #: Fingerprint folders kept: the one in use and the ones used last (other checkouts, branches).
 KEEP = 3
 #: The file of a fingerprint folder whose modification time is its last use.
@@ -67,7 +68,7 @@ def toolchain() -> str:
 
 def fingerprint(files: Iterable[Path] = ()) -> str:
     """16 hex digits of SHA-256 over :func:`toolchain` and the name (relative to the checkout or
-    site-packages) and content of each of ``files``, in the order given."""
+    the installed mbh package) and content of each of ``files``, in the order given."""
     digest = hashlib.sha256(toolchain().encode())
     for path in files:
         digest.update(path.relative_to(_ROOT).as_posix().encode() + b"\0")
@@ -170,7 +171,7 @@ def install() -> None:
 #
 # numba looks a function up in its cache (load_overload); on a miss it compiles it and saves it
 # (save_overload).  For the functions KernelCacheLocator places, a miss takes the function's lock
-# (harness.common.file_lock) and looks again: a process that waited finds what the holder saved
+# (mbh._harness.common.file_lock) and looks again: a process that waited finds what the holder saved
 # and loads it; else it keeps the lock while numba compiles, until the save (or a failed
 # compilation, _FailedCompileListener) releases it.  The call graph has no cycles, so two
 # processes taking a function's lock and then its callees' cannot wait for each other.

@@ -11,10 +11,10 @@ Shipped files (read only):
 Written files, never inside the installed package:
 
 * the user cache (:func:`user_cache`): references of scenes that are not shipped, generated
-  functions (:func:`generated_cache`) and compiled kernels (:mod:`harness.common.kernel_cache`);
+  functions (:func:`generated_cache`) and compiled kernels (:mod:`mbh._harness.common.kernel_cache`);
   ``$MBH_CACHE_HOME``, else the platform's cache folder for ``mbh`` (``$XDG_CACHE_HOME/mbh`` or
   ``~/.cache/mbh`` on Linux, via :mod:`platformdirs`);
-* the results root (:func:`harness.store.runs.results_root`): ``$MBH_RESULTS_DIR``, else
+* the results root (:func:`mbh._harness.store.runs.results_root`): ``$MBH_RESULTS_DIR``, else
   ``results/`` in a checkout, else the platform's data folder for ``mbh`` (``~/.local/share/mbh``
   on Linux).
 """
@@ -34,12 +34,21 @@ GENERATED_ENV = "MBH_GENERATED_DIR"
 #: The folders shipped with the harness.
 SHIPPED = ("scenarios", "campaigns")
 
-_CHECKOUT = Path(__file__).resolve().parents[2]
+#: The harness's code: the repository's harness/ in a checkout, mbh/_harness in an installed wheel
+#: (pyproject.toml maps the folder into the one import package).
+HARNESS_FOLDER = Path(__file__).resolve().parents[1]
+#: The adapters' code beside it: adapters/ in a checkout, mbh/_adapters in a wheel.
+ADAPTERS_FOLDER = HARNESS_FOLDER.parent / ("adapters" if HARNESS_FOLDER.name == "harness"
+                                           else "_adapters")
+#: The folder holding both: the checkout, or the installed mbh package.
+CODE_ROOT = HARNESS_FOLDER.parent
+
+_CHECKOUT = CODE_ROOT
 
 
 def checkout() -> Path | None:
     """The repository the harness runs from (a checkout or an editable install), or None for an
-    installed wheel: the folder holding ``pyproject.toml`` beside the ``harness`` package."""
+    installed wheel: the folder holding ``pyproject.toml`` beside the ``harness`` folder."""
     return _CHECKOUT if (_CHECKOUT / "pyproject.toml").is_file() else None
 
 
@@ -48,7 +57,7 @@ def shipped(folder: str) -> Path:
     the checkout's folder of that name."""
     if folder not in SHIPPED:
         raise ValueError(f"{folder!r} is not a shipped folder ({', '.join(SHIPPED)})")
-    packaged = Path(str(importlib.resources.files("harness") / folder))
+    packaged = Path(str(importlib.resources.files("mbh._harness") / folder))
     if packaged.is_dir():
         return packaged
     return _CHECKOUT / folder
@@ -61,7 +70,7 @@ def user_cache() -> Path:
 
 
 def generated_cache() -> Path:
-    """The folder of the generated functions (:mod:`adapters.inhouse.generated`):
+    """The folder of the generated functions (:mod:`mbh._adapters.inhouse.generated`):
     ``$MBH_GENERATED_DIR``, else ``generated`` in :func:`user_cache`."""
     configured = os.environ.get(GENERATED_ENV)
     return Path(configured) if configured else user_cache() / "generated"

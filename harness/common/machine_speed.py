@@ -1,6 +1,6 @@
 """A run's machine-speed figure: the wall time of a fixed workload of the pinned numpy and scipy,
 so that wall times of runs on different machines, or under different load, compare as ratios to
-their run's figure (calibrated times: :mod:`harness.store.compare`, the history page, the reports).
+their run's figure (calibrated times: :mod:`mbh._harness.store.compare`, the history page, the reports).
 
 It measures the machine, never this project's code: the workload calls numpy and scipy only, and
 their versions (pinned in ``constraints.txt``) are part of its name (:func:`workload_name`), so two
@@ -13,7 +13,7 @@ The workload mixes the two kinds of work a case does: small numpy arrays driven 
 (:func:`scipy.integrate.solve_ivp` on a pendulum) and compiled dense algebra (LU solves of a stack
 of 24 × 24 systems, the size of a planar mechanism's); its matrices are too small for BLAS to use
 threads.  A campaign measures it beside one busy core: in its own process while the warm template
-starts, else as the first case of its execution (:mod:`harness.run.calibration`; version 2;
+starts, else as the first case of its execution (:mod:`mbh._harness.run.calibration`; version 2;
 version 1 ran it in a fresh interpreter before the cases, ~2 % slower on the development machine:
 169.1 against 166.0 ms, medians of 6 alternating figures).
 """

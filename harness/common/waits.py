@@ -26,7 +26,7 @@ def show_on_stderr(quiet: bool = False) -> None:
     with ``quiet`` only warnings and errors.
 
     The handler writes to a duplicate of descriptor 2 taken now, so that a line said while an
-    engine's output is captured (:func:`harness.common.capture.captured_output`, which points
+    engine's output is captured (:func:`mbh._harness.common.capture.captured_output`, which points
     descriptor 2 at a file) still reaches the terminal rather than the case's notes.  A second
     call replaces the first one's handler.
     """

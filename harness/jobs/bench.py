@@ -6,7 +6,7 @@ on tiny inputs):
 * :func:`front_rows` — the in-house Pareto front against the best engine's: from the cases of the
   ``bench`` campaign (every adapter's candidate methods on every shipped scene over a ladder
   of steps), the fastest ``ok`` case reaching each accuracy level on the main output, in-house
-  versus every engine (:func:`harness.report.summary.front_ratio_table`, also in the report).
+  versus every engine (:func:`mbh._harness.report.summary.front_ratio_table`, also in the report).
 * :func:`overhead_rows` — each adapter's time per step in :meth:`Adapter.simulate` over its bare
   loop (:meth:`Adapter.bare_loop`: the same steps with no samples and no checks), measured
   interleaved, best of ``repeats``; and the state read-back time per sample
@@ -29,10 +29,10 @@ import time
 
 import numpy as np
 
-from adapters import adapter_names, get_adapter
-from adapters.base import UnsupportedCase
-from harness.model import scenario
-from harness.model.timegrid import sample_times
+from mbh._adapters import adapter_names, get_adapter
+from mbh._adapters.base import UnsupportedCase
+from mbh._harness.model import scenario
+from mbh._harness.model.timegrid import sample_times
 
 #: Scenarios of the overhead and fallback measurements: every shipped scene.
 SCENES = tuple(scenario.scenario_names())
@@ -167,7 +167,7 @@ def _exponent(rows: list[dict]) -> float | None:
 def reference_rows(live: bool = True) -> list[dict]:
     """Per shipped scenario and route: the stored build time, and (``live``) the time of the same
     route run now on the reference grid (s)."""
-    from harness.references.build import _run_route, reference_grid, reference_info, routes
+    from mbh._harness.references.build import _run_route, reference_grid, reference_info, routes
 
     rows = []
     for name in scenario.scenario_names():

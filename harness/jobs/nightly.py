@@ -5,15 +5,15 @@ Steps of :func:`nightly`:
 
 1. the previous run: the latest ``complete`` run of the same campaign (by name) under the results
    root, looked up before this run starts;
-2. the campaign runs into the store (:func:`harness.run.campaign.run_campaign`, calibration case
+2. the campaign runs into the store (:func:`mbh._harness.run.campaign.run_campaign`, calibration case
    included);
-3. the two runs are compared case by case (:func:`harness.store.compare.compare_runs`: errors as
+3. the two runs are compared case by case (:func:`mbh._harness.store.compare.compare_runs`: errors as
    ratios, wall times as ratios of calibrated times, i.e. each divided by its own run's
    calibration case);
 4. the campaign's history (every finished run of it, this one included) is searched for steps
-   (:func:`harness.report.history.find_changes`);
+   (:func:`mbh._harness.report.history.find_changes`);
 5. the reports are built into ``<run folder>/report/``: the run's report (``report.html``,
-   ``report.pdf``) when :mod:`harness.report.build` is installed, and the history page
+   ``report.pdf``) when :mod:`mbh._harness.report.build` is installed, and the history page
    (``history.html``) linking to every run's report (otherwise the step is skipped with a note);
 6. the gate's record ``<run folder>/nightly_gate.json`` (the regressions open after this run)
    and a short summary, printed and written as Markdown (``<run folder>/nightly_summary.md``
@@ -22,7 +22,7 @@ Steps of :func:`nightly`:
 The gate (``gate``):
 
 * ``"history"`` (default): a regression is a step for the worse in a case's history that is still
-  open at this run (:func:`harness.report.history.open_regressions`: newly not ``ok``, an error
+  open at this run (:func:`mbh._harness.report.history.open_regressions`: newly not ``ok``, an error
   grown at least ×2, a calibrated time grown at least ×1.1 beyond its measured noise and seen on
   two runs) and that no earlier nightly's record lists as open: each regression fails one night,
   then stays listed as "still open" until the case is back at its level.  The summary lists what
@@ -32,7 +32,7 @@ The gate (``gate``):
   error more than ``error_factor`` times the previous one) or slower (calibrated time more than
   ``time_factor`` times the previous one).
 
-The thresholds are command-line options: the campaign file format (:mod:`harness.run.spec`)
+The thresholds are command-line options: the campaign file format (:mod:`mbh._harness.run.spec`)
 accepts no other keys.  Exit status (:attr:`NightlyOutcome.exit_code`): 0 no regression, 1 at
 least one regression (by the chosen gate), 3 no regression but the report or the history page
 could not be built.
@@ -48,14 +48,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from harness.run.spec import load_campaign
-from harness.run.campaign import run_campaign
-from harness.run.row import CaseWork
-from harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
+from mbh._harness.run.spec import load_campaign
+from mbh._harness.run.campaign import run_campaign
+from mbh._harness.run.row import CaseWork
+from mbh._harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
-from harness.store.compare import comparable_calibrations, compare_runs
-from harness.store.runs import RunStore, latest_run, list_runs
-from harness.common.numbers import format_number
+from mbh._harness.store.compare import comparable_calibrations, compare_runs
+from mbh._harness.store.runs import RunStore, latest_run, list_runs
+from mbh._harness.common.numbers import format_number
 
 #: Default campaign of ``mbh nightly``.
 DEFAULT_CAMPAIGN = "nightly"
@@ -68,7 +68,7 @@ ERROR_FACTOR = 10.0
 #: Default threshold of the previous-run gate: an ``ok`` case whose calibrated wall time grew
 #: more than this many times.
 TIME_FACTOR = 2.0
-#: Change classes of :func:`harness.store.compare.compare_runs` that are regressions.
+#: Change classes of :func:`mbh._harness.store.compare.compare_runs` that are regressions.
 REGRESSIONS = ("newly failing", "less accurate", "slower")
 #: Change classes reported as improvements in the summary.
 IMPROVEMENTS = ("newly passing", "more accurate", "faster")
@@ -87,7 +87,7 @@ SUMMARY_LINES = 30
 
 
 def case_work(campaign):
-    """The work function every case of a nightly runs (:class:`harness.run.row.CaseWork` with the
+    """The work function every case of a nightly runs (:class:`mbh._harness.run.row.CaseWork` with the
     campaign's bounds and accuracy).  Tests replace it (pytest ``monkeypatch``) to inject a
     regression; nothing else does."""
     return CaseWork(campaign.bounds, campaign.accuracy)
@@ -100,7 +100,7 @@ class HistoryGate:
     Attributes
     ----------
     changes : DataFrame
-        :func:`harness.report.history.find_changes` over every finished run of the campaign.
+        :func:`mbh._harness.report.history.find_changes` over every finished run of the campaign.
     new : DataFrame
         Open regressions no earlier nightly's record lists (what fails the history gate).
     still_open : DataFrame
@@ -129,7 +129,7 @@ class NightlyOutcome:
     previous : str or None
         Run id compared against (None: no earlier complete run of the campaign).
     changes : DataFrame
-        :func:`harness.store.compare.compare_runs` of the previous run → this one (empty without one).
+        :func:`mbh._harness.store.compare.compare_runs` of the previous run → this one (empty without one).
     history : HistoryGate
     gate : str
         One of :data:`GATES`.
@@ -167,7 +167,7 @@ class NightlyOutcome:
 
 
 def regressions_of(changes: pd.DataFrame) -> pd.DataFrame:
-    """The rows of a :func:`harness.store.compare.compare_runs` table that are :data:`REGRESSIONS`."""
+    """The rows of a :func:`mbh._harness.store.compare.compare_runs` table that are :data:`REGRESSIONS`."""
     return changes[changes["change"].isin(REGRESSIONS)]
 
 
@@ -223,17 +223,17 @@ def build_reports(store: RunStore, previous: str | None, root, formats,
     """The run's reports and the history page in ``<run folder>/report/``, and a note on what
     happened.
 
-    Skipped with a note when :mod:`harness.report.build` is not installed or ``formats`` is
+    Skipped with a note when :mod:`mbh._harness.report.build` is not installed or ``formats`` is
     empty; a failing build is a note beginning with one of :data:`FAILED_NOTES` (the run stays
     stored).
     """
     if not formats:
         return {}, "report skipped (--no-report)"
     try:
-        from harness.report.build import build_report
-        from harness.report.history_page import build_history
+        from mbh._harness.report.build import build_report
+        from mbh._harness.report.history_page import build_history
     except ImportError as error:
-        return {}, f"report skipped: harness.report.build is not available ({error})"
+        return {}, f"report skipped: mbh._harness.report.build is not available ({error})"
     folder = store.path / REPORT_FOLDER
     try:
         written = build_report(store.run_id, against=previous, formats=formats, out=folder,
@@ -354,7 +354,7 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
     campaign_name : str
         Shipped campaign name or campaign file.
     root : path, optional
-        Results root (default :func:`harness.store.runs.results_root`).
+        Results root (default :func:`mbh._harness.store.runs.results_root`).
     workers : int, optional
         Local worker processes (default: the cores).
     gate : str
@@ -370,7 +370,7 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
 
     Raises
     ------
-    harness.run.spec.CampaignError, harness.run.campaign.RunnerError, ValueError
+    mbh._harness.run.spec.CampaignError, mbh._harness.run.campaign.RunnerError, ValueError
         A campaign file with mistakes, a run that cannot start, thresholds not above 1, an
         unknown gate.
     """

@@ -4,7 +4,7 @@ Baumgarte α = β = 5 / direct violation correction, fixed step Δt = 0.01 s, th
 the slider-crank for 8 s.  Reported per case: maximum and mean constraint violation (m: the
 neutral joint gap, or lever × orientation residual; the seed's |Φ| mixes metres with direction
 cosines), maximum energy-balance error, wall time (mean of three runs, as the seed) and mean
-Newton iterations per step.  Every run is judged by the measuring stick (:func:`harness.run.case.run_case`,
+Newton iterations per step.  Every run is judged by the measuring stick (:func:`mbh._harness.run.case.run_case`,
 against the verified reference), so a row's status says whether its answer can be trusted.
 """
 
@@ -12,11 +12,11 @@ from __future__ import annotations
 
 import statistics
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.run.case import run_case
-from harness.references.build import reference_trajectory
-from harness.measure.verdict import DEFAULT_BOUNDS, Bounds
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.run.case import run_case
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.measure.verdict import DEFAULT_BOUNDS, Bounds
 
 SEED_SCENARIOS = ("fourbar_spatial", "slider_crank")
 SEED_INTEGRATORS = ("rk4", "rkn4", "bdf4")

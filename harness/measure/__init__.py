@@ -2,5 +2,5 @@
 errors against the reference (``metrics``), the energy balance (``energy``), the assembly branch
 (``branch``) and the verdict that makes a case ``ok`` or not (``verdict``).
 
-May import: :mod:`harness.common`, :mod:`harness.model`, :mod:`harness.neutral`.
+May import: :mod:`mbh._harness.common`, :mod:`mbh._harness.model`, :mod:`mbh._harness.neutral`.
 """

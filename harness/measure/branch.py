@@ -29,10 +29,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.model.mechanism import GROUND, Mechanism
-from harness.model.outputs import body_rotations, joint_angle, joint_slide
-from harness.model.trajectory import Trajectory
-from harness.measure.per_reference import per_reference, read_only
+from mbh._harness.model.mechanism import GROUND, Mechanism
+from mbh._harness.model.outputs import body_rotations, joint_angle, joint_slide
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.measure.per_reference import per_reference, read_only
 
 #: At most this many reference samples are used to test the premise (an even stride through it).
 PREMISE_SAMPLES = 2000

@@ -32,12 +32,12 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper,
+from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper,
                            characteristic_length)
-from harness.model.outputs import body_frame, body_rotations, joint_angle, joint_slide, wrap_angle
-from harness.model.timegrid import reference_indices
-from harness.model.trajectory import BodyStates, Trajectory
-from harness.measure.per_reference import per_reference, read_only
+from mbh._harness.model.outputs import body_frame, body_rotations, joint_angle, joint_slide, wrap_angle
+from mbh._harness.model.timegrid import reference_indices
+from mbh._harness.model.trajectory import BodyStates, Trajectory
+from mbh._harness.measure.per_reference import per_reference, read_only
 
 #: Degree of the spline through sampled power (odd, so not-a-knot ends are symmetric).
 QUADRATURE_DEGREE = 9

@@ -7,13 +7,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.measure.energy import energy_balance, energy_scale
-from harness.measure.per_reference import per_reference, read_only
-from harness.neutral.equations import JointEquations
-from harness.model.mechanism import GROUND, Mechanism
-from harness.model.outputs import output_series
-from harness.model.timegrid import reference_indices
-from harness.model.trajectory import Trajectory
+from mbh._harness.measure.energy import energy_balance, energy_scale
+from mbh._harness.measure.per_reference import per_reference, read_only
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.mechanism import GROUND, Mechanism
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.timegrid import reference_indices
+from mbh._harness.model.trajectory import Trajectory
 
 
 def lever_length(mech: Mechanism) -> float:
@@ -27,7 +27,7 @@ def lever_length(mech: Mechanism) -> float:
 
 
 def violation_series(mech: Mechanism, trajectory: Trajectory) -> dict:
-    """Per-sample violation of the neutral joint equations (:mod:`harness.neutral.equations`).
+    """Per-sample violation of the neutral joint equations (:mod:`mbh._harness.neutral.equations`).
 
     Returns
     -------
@@ -99,11 +99,11 @@ def case_metrics(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
 
     Output errors are max |y − y_ref| over the samples reached (rad, rad/s or m); sample times
     must lie on the reference grid (ValueError otherwise).  The energy-balance error is in J and
-    relative to :func:`harness.measure.energy.energy_scale` of the reference (the most energy that moves
+    relative to :func:`mbh._harness.measure.energy.energy_scale` of the reference (the most energy that moves
     through it: kinetic, potential range or applied work; M·|g|·ℓ for a reference at rest;
     ``None`` when neither exists); with a reference the work of
     dampers and spatial world torques uses the reference as a control variate
-    (:func:`harness.measure.energy.energy_balance`).
+    (:func:`mbh._harness.measure.energy.energy_balance`).
     """
     metrics = {
         "status": trajectory.status, "reason": trajectory.reason,

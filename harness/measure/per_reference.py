@@ -5,11 +5,11 @@ Every case of a scene is judged against the same reference, and the stick derive
 figures from it in every case: the energy scale (twice: verdict and metrics), the reference's
 energy-balance baseline, its driver series and markers, the branch check's premise and its
 outputs.  In a campaign each case runs in a process forked from the warm template
-(:mod:`harness.run.warm`), which reads the reference once and computes these once
-(:func:`harness.measure.verdict.prepare_reference`), so the cases find them.
+(:mod:`mbh._harness.run.warm`), which reads the reference once and computes these once
+(:func:`mbh._harness.measure.verdict.prepare_reference`), so the cases find them.
 
 A value is kept only for a reference whose arrays are all read-only, as the reference store
-returns them (:func:`harness.store.reference_files.read_unchecked`): a trajectory that can change
+returns them (:func:`mbh._harness.store.reference_files.read_unchecked`): a trajectory that can change
 could make a kept value stale.  Values are keyed by the reference object itself, the function
 and the mechanism's content hash (equal hashes: equal mechanisms), and are the values the function
 returns; those of the last :data:`MAX_REFERENCES` references used are kept.
@@ -23,8 +23,8 @@ from typing import Callable, TypeVar
 
 import numpy as np
 
-from harness.model.mechanism import Mechanism
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.trajectory import Trajectory
 
 T = TypeVar("T")
 

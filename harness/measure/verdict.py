@@ -1,22 +1,22 @@
 """The measuring stick's verdict on a run (docs/design.md, rule 5: ``ok`` is a promise).
 
 An adapter's own status says only that its integrator did not give up.  After every run the
-harness judges the returned :class:`~harness.model.trajectory.Trajectory` the same way for every adapter
+harness judges the returned :class:`~mbh._harness.model.trajectory.Trajectory` the same way for every adapter
 and withdraws ``ok`` at the first sample where
 
 1. a position, orientation or velocity is not finite (→ ``diverged``);
 2. a joint gap exceeds ``gap`` × the mechanism's size :func:`characteristic_length` (m), or a joint
    orientation violation exceeds ``orientation`` (rad);
-3. the energy-balance error |e(t)| (:func:`harness.measure.energy.energy_balance`) exceeds ``energy`` ×
-   the energy scale :func:`harness.measure.energy.energy_scale` (J: the most energy that moves through
+3. the energy-balance error |e(t)| (:func:`mbh._harness.measure.energy.energy_balance`) exceeds ``energy`` ×
+   the energy scale :func:`mbh._harness.measure.energy.energy_scale` (J: the most energy that moves through
    the reference — its largest kinetic energy, potential-energy range or applied work; M·|g|·ℓ
    for a scene at rest or without a reference; not judged, with a note, when neither exists);
 4. the configuration left the assembly branch of the start: it is farther than ``branch`` × the
    mechanism's size from the reference's configuration at the same value of the driver
-   coordinate (see :mod:`harness.measure.branch`);
+   coordinate (see :mod:`mbh._harness.measure.branch`);
 5. the configuration left the reference's motion: it is farther than ``trajectory`` × the
    mechanism's size from the reference's configuration at the same time (the largest distance
-   over the bodies' centres of mass and joint points, :func:`harness.measure.branch.markers`), or a body
+   over the bodies' centres of mass and joint points, :func:`mbh._harness.measure.branch.markers`), or a body
    is turned by more than ``trajectory`` rad from the reference's orientation at the same time
    (the distance's angular counterpart, as ``orientation`` is the gap's: a turn of 0.1 rad moves
    a point at the mechanism's size from the axis by 0.1 of the size; without it a small body can
@@ -53,14 +53,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.measure.branch import BranchCheck, branch_distance, markers, reference_side
-from harness.measure.energy import energy_balance, energy_scale, has_quadrature_loads, \
+from mbh._harness.measure.branch import BranchCheck, branch_distance, markers, reference_side
+from mbh._harness.measure.energy import energy_balance, energy_scale, has_quadrature_loads, \
     reference_quadrature_work
-from harness.measure.metrics import reference_outputs, violation_series
-from harness.model.mechanism import Mechanism, characteristic_length
-from harness.model.outputs import rotation_between
-from harness.model.timegrid import TIME_MATCH, reference_indices
-from harness.model.trajectory import Trajectory
+from mbh._harness.measure.metrics import reference_outputs, violation_series
+from mbh._harness.model.mechanism import Mechanism, characteristic_length
+from mbh._harness.model.outputs import rotation_between
+from mbh._harness.model.timegrid import TIME_MATCH, reference_indices
+from mbh._harness.model.trajectory import Trajectory
 
 #: Largest joint gap, as a fraction of :func:`characteristic_length` (2.9 cm on the 5.7 m
 #: four-bar, 9 mm on the 1.9 m spatial slider-crank).
@@ -137,7 +137,7 @@ DEFAULT_ACCURACY = 1e-6
 
 def joint_violations(mech: Mechanism, trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """Largest joint gap (m) and orientation violation (rad) at every sample, each (n,), from the
-    neutral joint equations (:func:`harness.measure.metrics.violation_series`); for a planar mechanism a
+    neutral joint equations (:func:`mbh._harness.measure.metrics.violation_series`); for a planar mechanism a
     body's departure from the plane counts as a gap and its tilt out of it as an orientation
     violation."""
     series = violation_series(mech, trajectory)
@@ -268,7 +268,7 @@ def _stick_checks(mech, trajectory, reference, bounds, notes) -> list[Check]:
 def prepare_reference(mech: Mechanism, reference: Trajectory) -> None:
     """Compute now what judging and measuring a run of ``mech`` derive from ``reference`` alone
     (the energy scale and baseline, the branch check's reference side, the outputs); kept for a
-    frozen reference (:mod:`harness.measure.per_reference`), so that the warm template computes
+    frozen reference (:mod:`mbh._harness.measure.per_reference`), so that the warm template computes
     them once for every case forked from it."""
     energy_scale(mech, reference)
     if has_quadrature_loads(mech):

@@ -5,5 +5,5 @@ with zero moments (``free_turns``); the body graph
 (``topology``); body-state trajectories (``trajectory``); the sample and reference time grids
 (``timegrid``); and the outputs of interest read from body states (``outputs``).
 
-May import: :mod:`harness.common`.
+May import: :mod:`mbh._harness.common`.
 """

@@ -3,8 +3,8 @@
 :class:`MechanismBuilder` collects the same document a scenario file parses to — top-level fields,
 ``[[bodies]]``, ``[[joints]]``, ``[[forces]]``, ``[initial]``, ``[outputs]``, ``[reference]``,
 with the field names, units and conventions of docs/formats/scenario.md — and hands it to the file
-loader's validator (:func:`harness.model.scenario.from_document`).  A mechanism built here
-therefore obeys the same rules, fails with the same :class:`~harness.model.scenario.ScenarioError`
+loader's validator (:func:`mbh._harness.model.scenario.from_document`).  A mechanism built here
+therefore obeys the same rules, fails with the same :class:`~mbh._harness.model.scenario.ScenarioError`
 (every problem, each naming the field), and has the same ``content_hash`` as a file holding the
 same document: the reference and result caches cannot tell them apart, and two different
 mechanisms never share a reference.
@@ -25,8 +25,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from harness.model.mechanism import Mechanism
-from harness.model.scenario import Problem, ScenarioError, _join, _key_text, from_document
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.scenario import Problem, ScenarioError, _join, _key_text, from_document
 
 #: Deepest nesting of lists and tables a built document may have; a scenario's deepest field,
 #: ``initial.velocities[i].location``, is 4 deep.
@@ -88,7 +88,7 @@ class MechanismBuilder:
     --------
     A pendulum: a 1 kg bar of 1 m swinging about its end, released horizontal.
 
-    >>> from harness.model.builder import MechanismBuilder
+    >>> from mbh._harness.model.builder import MechanismBuilder
     >>> pendulum = (MechanismBuilder("bar_pendulum", kind="planar", plane="xy", duration=1.0,
     ...                              gravity=[0.0, -9.81, 0.0])
     ...             .body("bar", mass=1.0, inertia=[0.0, 1 / 12, 1 / 12], position=[0.5, 0.0, 0.0])

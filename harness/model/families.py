@@ -1,7 +1,7 @@
 """Generated scenario families: one document generator per family, members named ``family@N``.
 
 A member is the TOML-equivalent document (a plain dict, exactly what :func:`tomllib.loads` would
-return for an equivalent file) that :func:`harness.model.scenario.load` validates with the same loader as
+return for an equivalent file) that :func:`mbh._harness.model.scenario.load` validates with the same loader as
 a shipped file.  Families so far:
 
 ``n_fourbar``
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
-from harness.common.errors import MbhError
+from mbh._harness.common.errors import MbhError
 
 #: Largest accepted N: 2N + 1 bodies; beyond a few hundred the dense in-house kernels and the
 #: reference build are out of reach anyway.

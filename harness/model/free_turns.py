@@ -21,7 +21,7 @@ joint's cross axes (world, at the start):
 A planar body turns about z only: it is held unless its moment about z is zero and no joint ties
 it at a point away from its centre of mass.  Zero-moment bodies joined to each other can together
 still have a free motion this one-body view misses; the neutral dynamics refuses those when the
-reference is built (:mod:`harness.neutral.dynamics`, ``IndeterminateAccelerations``).
+reference is built (:mod:`mbh._harness.neutral.dynamics`, ``IndeterminateAccelerations``).
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from typing import Iterable
 
 import numpy as np
 
-from harness.model.mechanism import Body, Joint
+from mbh._harness.model.mechanism import Body, Joint
 
 #: Relative size (of the trace) below which a principal moment counts as zero.
 ZERO_MOMENT = 1e-12

@@ -226,7 +226,7 @@ class Mechanism:
     initial: InitialState
     duration: float
     outputs: tuple[Output, ...]
-    #: Spacing of the evaluation grid, s (:mod:`harness.model.timegrid`): fine enough that no joint
+    #: Spacing of the evaluation grid, s (:mod:`mbh._harness.model.timegrid`): fine enough that no joint
     #: turns by π between two samples.
     sample_step: float = 0.01
     tags: tuple[str, ...] = ()
@@ -236,7 +236,7 @@ class Mechanism:
     #: Pairs of joints that turn by equal angles on the assembly branch the motion stays on
     #: (``[reference] equal_joint_angles``); only the reference routes use them.
     branch: tuple[tuple[str, str], ...] = ()
-    #: Whether the reference takes the neutral DOP853 routes of :mod:`harness.references.routes`
+    #: Whether the reference takes the neutral DOP853 routes of :mod:`mbh._harness.references.routes`
     #: (``[reference] routes = "neutral"``, implied by a declared branch).
     neutral_routes: bool = False
 

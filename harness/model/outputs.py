@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from harness.model.mechanism import GROUND, Joint, Mechanism
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.mechanism import GROUND, Joint, Mechanism
+from mbh._harness.model.trajectory import Trajectory
 
 
 def body_rotations(quaternions: np.ndarray) -> np.ndarray:

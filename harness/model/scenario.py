@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from harness.model.mechanism import (
+from mbh._harness.model.mechanism import (
     DRIVABLE,
     GROUND,
     JOINT_TYPES,
@@ -41,15 +41,15 @@ from harness.model.mechanism import (
     PrescribedPointVelocity,
     SpringDamper,
 )
-from harness.model.families import FamilyError, family_document, family_names
-from harness.model import parts as shapes
-from harness.model.free_turns import ZERO_MOMENT as _ZERO_MOMENT, free_turn
-from harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
-from harness.common.errors import MbhError
-from harness.common.kept_files import read_kept
-from harness.common.locations import shipped
+from mbh._harness.model.families import FamilyError, family_document, family_names
+from mbh._harness.model import parts as shapes
+from mbh._harness.model.free_turns import ZERO_MOMENT as _ZERO_MOMENT, free_turn
+from mbh._harness.model.timegrid import EVALUATION_STEP, GRID_STEP, STEP_MATCH
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.kept_files import read_kept
+from mbh._harness.common.locations import shipped
 
-#: The shipped scenario files (harness.common.locations: the checkout's or the installed package's).
+#: The shipped scenario files (mbh._harness.common.locations: the checkout's or the installed package's).
 SCENARIO_DIR = shipped("scenarios")
 
 _TOP_KEYS = {"name", "kind", "plane", "duration", "sample_step", "gravity", "tags", "notes", "bodies", "joints",
@@ -313,7 +313,7 @@ def inertia_problem(tensor: np.ndarray) -> str | None:
     principal moment zero (below ``_ZERO_MOMENT`` of the trace), the other two equal (the triangle
     inequality with equality), or a point mass's: all three zero.  Whether the joints hold the
     turns such a body has no inertia against is checked with the joints
-    (:mod:`harness.model.free_turns`).
+    (:mod:`mbh._harness.model.free_turns`).
     """
     principal = np.linalg.eigvalsh(tensor)
     total = principal.sum()
@@ -390,7 +390,7 @@ def from_document(document: dict, name: str, source: str) -> Mechanism:
     """Validate a scenario document (the dict a scenario file parses to) named ``name`` (the
     file's stem: its ``name`` key, if any, wins) and build its :class:`Mechanism`; ``source``
     names it in every problem, as a file path does.  Used by the file loader and the Python
-    builder (:mod:`harness.model.builder`), so both check the same rules and hash the same
+    builder (:mod:`mbh._harness.model.builder`), so both check the same rules and hash the same
     document the same way.
 
     Raises
@@ -405,7 +405,7 @@ def from_document(document: dict, name: str, source: str) -> Mechanism:
 
 
 def _load_family_member(name: str) -> Mechanism:
-    """Member ``family@parameter`` of a generated family (:mod:`harness.model.families`), validated by
+    """Member ``family@parameter`` of a generated family (:mod:`mbh._harness.model.families`), validated by
     the same loader as a file."""
 
     family, _, parameter = name.partition("@")
@@ -550,7 +550,7 @@ class _Builder:
 
     def _body_of_parts(self, table: dict, path: str, rotation: np.ndarray | None) -> tuple:
         """(mass kg, centroidal inertia (3, 3) in the body frame of ``rotation``, centre of
-        mass (3,) m) of the body's ``parts`` (:mod:`harness.model.parts`), or Nones."""
+        mass (3,) m) of the body's ``parts`` (:mod:`mbh._harness.model.parts`), or Nones."""
         c = self.c
         for key in _COMPUTED_FROM_PARTS:
             if key in table:
@@ -656,7 +656,7 @@ class _Builder:
 
     def _held_turns(self) -> None:
         """Every body with zero principal moments must have the turns about those axes held by
-        its joints (:mod:`harness.model.free_turns`).  Skipped while a joint has problems: a
+        its joints (:mod:`mbh._harness.model.free_turns`).  Skipped while a joint has problems: a
         free turn would then only echo them."""
         joints = [joint for joint in self.joints.values() if joint is not None]
         tables = self.doc.get("joints")

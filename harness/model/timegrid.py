@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 
 #: Spacing of the reference grid, s: every reference is stored on this grid, and every sample
 #: time of a case lands on it.

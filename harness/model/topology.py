@@ -37,7 +37,7 @@ from itertools import combinations
 
 import numpy as np
 
-from harness.model.mechanism import GROUND, PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Joint, Mechanism
+from mbh._harness.model.mechanism import GROUND, PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Joint, Mechanism
 
 #: Largest number of candidate cut sets :func:`spanning_tree` enumerates (about 1 s of search).
 EXHAUSTIVE_LIMIT = 20_000
@@ -287,8 +287,8 @@ def spanning_tree(mech: Mechanism, closure_equations: Callable[[Joint], int]) ->
     SpanningTree
         ``redundant_closure_equations`` is Σ max(0, closure_equations(joint) − class) over the
         cut joints, with the class the number of independent equations the joint imposes in the
-        mechanism's own dimension (:data:`~harness.model.mechanism.PLANAR_JOINT_CLASS` for a planar
-        mechanism, :data:`~harness.model.mechanism.SPATIAL_JOINT_CLASS` otherwise).
+        mechanism's own dimension (:data:`~mbh._harness.model.mechanism.PLANAR_JOINT_CLASS` for a planar
+        mechanism, :data:`~mbh._harness.model.mechanism.SPATIAL_JOINT_CLASS` otherwise).
 
     Raises
     ------

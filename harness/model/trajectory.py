@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 #: How a case ended, the same vocabulary for every adapter (the run loop of
-#: :mod:`adapters.base` classifies):
+#: :mod:`mbh._adapters.base` classifies):
 #:
 #: * ``ok``: every state the run produced and the loop read was finite and within bounds;
 #: * ``diverged``: a non-finite or exploding state (position, orientation, velocity or angular

@@ -5,12 +5,12 @@ conditioning of Φ_q along a motion (``conditioning``), the one start every engi
 (``start``) and the neutral equations of motion the branch routes integrate (``dynamics``,
 compiled in ``dynamics_kernels``).
 
-Its compiled kernels are cached where :mod:`harness.common.kernel_cache` places them, set up here
+Its compiled kernels are cached where :mod:`mbh._harness.common.kernel_cache` places them, set up here
 before any of its modules loads.
 
-May import: :mod:`harness.common`, :mod:`harness.model`.
+May import: :mod:`mbh._harness.common`, :mod:`mbh._harness.model`.
 """
 
-from harness.common import kernel_cache
+from mbh._harness.common import kernel_cache
 
 kernel_cache.install()

@@ -12,7 +12,7 @@ components) in least squares; every condition is then checked.
 
 Then the start is checked and refused with :class:`AssemblyError` when Newton did not converge,
 when the configuration is singular (rank lost, or the condition number of [independent rows;
-driver row] above :data:`harness.neutral.mobility.CONDITION_LIMIT`), when the velocity conditions cannot all
+driver row] above :data:`mbh._harness.neutral.mobility.CONDITION_LIMIT`), when the velocity conditions cannot all
 hold, or when the driver's value or rate is not the one asked.
 """
 
@@ -24,11 +24,11 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from harness.neutral.equations import JointEquations, body_twists, point_velocity_jacobian
-from harness.model.mechanism import DRIVABLE, Mechanism, PrescribedJointRate, PrescribedPointVelocity
-from harness.neutral.mobility import CONDITION_LIMIT, RankReport, rank_analysis
-from harness.model.trajectory import BodyStates
-from harness.common.errors import MbhError
+from mbh._harness.neutral.equations import JointEquations, body_twists, point_velocity_jacobian
+from mbh._harness.model.mechanism import DRIVABLE, Mechanism, PrescribedJointRate, PrescribedPointVelocity
+from mbh._harness.neutral.mobility import CONDITION_LIMIT, RankReport, rank_analysis
+from mbh._harness.model.trajectory import BodyStates
+from mbh._harness.common.errors import MbhError
 
 #: Newton stops, and a start is accepted, when max |residual| ≤ this × max(1, L), in m or rad, with
 #: L (m) the mechanism's size (largest |coordinate| of a reference position or joint point).  The
@@ -118,7 +118,7 @@ def newton_positions(mech: Mechanism, equations, tolerance: float,
     ----------
     mech : Mechanism
     equations
-        :class:`~harness.neutral.equations.JointEquations` or an object with its ``residuals`` and
+        :class:`~mbh._harness.neutral.equations.JointEquations` or an object with its ``residuals`` and
         ``jacobian``.
     tolerance : float
         max |residual| (m or rad) at which the iteration has converged; two polishing steps

@@ -1,7 +1,7 @@
 """Where a scene is near-singular, and which failures happened there.
 
 The conditioning of a configuration is σ_r/σ_1 of the joint Jacobian Φ_q (joint rows only, with
-respect to the body twists, :meth:`harness.neutral.equations.JointEquations.jacobian`), r the rank
+respect to the body twists, :meth:`mbh._harness.neutral.equations.JointEquations.jacobian`), r the rank
 at the first sample: rows that are redundant everywhere (an overconstrained loop such as Bricard's)
 do not make every instant singular, and a rank lost later shows as σ_r/σ_1 → 0.
 
@@ -22,11 +22,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.signal import find_peaks
 
-from harness.neutral.assembly import assemble
-from harness.neutral.equations import JointEquations
-from harness.model.mechanism import Mechanism
-from harness.neutral.mobility import independent_rows
-from harness.model.trajectory import Trajectory
+from mbh._harness.neutral.assembly import assemble
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.neutral.mobility import independent_rows
+from mbh._harness.model.trajectory import Trajectory
 
 #: Fraction of its median at or below which a local minimum of σ_r/σ_1 counts as a near-singular
 #: position.  On the shipped references the factor lies 4.7× above the shallowest passage and
@@ -52,7 +52,7 @@ class Conditioning:
     ratio : ndarray, shape (n,)
         σ_r/σ_1 of Φ_q (joint rows, no driver row) at each sample; 0 where σ_1 = 0.
     rank : int
-        r: the rank of Φ_q at the first sample (:func:`harness.neutral.mobility.independent_rows`).
+        r: the rank of Φ_q at the first sample (:func:`mbh._harness.neutral.mobility.independent_rows`).
     n_rows : int
         Joint rows of Φ_q (n_rows − rank of them are redundant at the start).
     minima : ndarray of int
@@ -126,7 +126,7 @@ def label_failure(mech: Mechanism, trajectory: Trajectory,
     Parameters
     ----------
     trajectory : Trajectory
-        The judged run (:func:`harness.measure.verdict.judge`); returned unchanged when ``ok``.
+        The judged run (:func:`mbh._harness.measure.verdict.judge`); returned unchanged when ``ok``.
     reference : Trajectory or None
         The verified reference (without one, only the redundancy is checked, at the assembled
         start).

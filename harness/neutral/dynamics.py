@@ -1,5 +1,5 @@
 """The neutral model's accelerations at a consistent state: Newton–Euler in body twists with the
-joint equations of :mod:`harness.neutral.equations` as index-1 constraints.
+joint equations of :mod:`mbh._harness.neutral.equations` as index-1 constraints.
 
 Equations (Rouvinen 2003, §3: Newton–Euler equations with Lagrange multipliers; Frączek & Wojtyra 2009, eq. 1.62 for the
 acceleration-level constraint)
@@ -18,16 +18,16 @@ M is positive definite on the null space of G, the multipliers need not be.  Whe
 body with a zero principal moment free to turn about that axis: a slender bar on a revolute or
 spherical joint on its own axis) any rate of that turn solves the equations, and
 :class:`IndeterminateAccelerations` is raised rather than one of them returned.  Ġ ν is the central
-difference of :meth:`~harness.neutral.equations.JointEquations.velocity_residuals` along the motion
+difference of :meth:`~mbh._harness.neutral.equations.JointEquations.velocity_residuals` along the motion
 at fixed twists (positions advanced by v·h, orientations by the rotation ω·h), of sixth order.
 
 Planar mechanisms use the planar twists [v_x, v_y, ω_z] of the joint equations, with the inertia
 about z; their gyroscopic term vanishes (z is a principal axis of a planar body).
 
-Loads: gravity m g on every body; :class:`~harness.model.mechanism.BodyForce` at its point;
-:class:`~harness.model.mechanism.BodyTorque`; :class:`~harness.model.mechanism.JointActuation` as a torque (revolute,
+Loads: gravity m g on every body; :class:`~mbh._harness.model.mechanism.BodyForce` at its point;
+:class:`~mbh._harness.model.mechanism.BodyTorque`; :class:`~mbh._harness.model.mechanism.JointActuation` as a torque (revolute,
 cylindrical) or a force at the joint points (prismatic, translational) along each body's own world
-axis, +value on ``body2`` and −value on ``body1``; :class:`~harness.model.mechanism.SpringDamper` as the
+axis, +value on ``body2`` and −value on ``body1``; :class:`~mbh._harness.model.mechanism.SpringDamper` as the
 tension k (L − L₀) + c L̇ along the line between its points.
 """
 
@@ -39,10 +39,10 @@ import numpy as np
 import scipy.linalg
 from scipy.spatial.transform import Rotation
 
-from harness.neutral.equations import JointEquations, body_twists
-from harness.model.outputs import body_rotations
-from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
-from harness.model.trajectory import BodyStates
+from mbh._harness.neutral.equations import JointEquations, body_twists
+from mbh._harness.model.outputs import body_rotations
+from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.trajectory import BodyStates
 
 #: Time step h (s) of the central differences that give Ġ ν: truncation h⁶/140 times the seventh
 #: derivative (≈ 1e-15 relative for rates up to 7 rad/s), round-off ≈ 2e-16 / h ≈ 2e-13 relative.
@@ -54,7 +54,7 @@ DIFFERENCE_TURN = 1e-2
 _TORQUE_JOINTS = ("revolute", "cylindrical")
 #: Smallest ratio of the least to the largest eigenvalue of the mass matrix on the null space of
 #: G for which the accelerations count as unique: generated mechanisms
-#: (:mod:`harness.testing.strategies`) stay five orders of magnitude above it, a bar free to spin
+#: (:mod:`mbh._harness.testing.strategies`) stay five orders of magnitude above it, a bar free to spin
 #: about its own axis falls below it (figures: docs/measurements.md, section "Neutral dynamics").
 UNIQUENESS_RATIO = 1e-9
 #: Relative cut-off of the singular values in the KKT least-squares solve.  Redundant joint
@@ -227,7 +227,7 @@ def accelerations(mech: Mechanism, states: BodyStates, equations=None,
         residuals are assumed zero; the driver is free, not prescribed).
     equations : optional
         The constraint rows: default ``JointEquations(mech)``; any object with its ``jacobian``
-        and ``velocity_residuals`` (e.g. with a branch's rows, :mod:`harness.references.routes`).
+        and ``velocity_residuals`` (e.g. with a branch's rows, :mod:`mbh._harness.references.routes`).
     baumgarte : (α, β), optional
         Baumgarte's stabilisation, 1/s: the acceleration rows become G ν̇ = γ − 2α Φ̇ − β² Φ, so
         a state slightly off the constraints is pulled back instead of drifting (needs the

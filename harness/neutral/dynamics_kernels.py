@@ -1,9 +1,9 @@
-"""Compiled (numba) right-hand sides of the neutral reference routes (:mod:`harness.references.routes`).
+"""Compiled (numba) right-hand sides of the neutral reference routes (:mod:`mbh._harness.references.routes`).
 
-The same equations as :mod:`harness.neutral.dynamics` (mass matrix, applied wrenches, γ by the
+The same equations as :mod:`mbh._harness.neutral.dynamics` (mass matrix, applied wrenches, γ by the
 sixth-order central difference, the uniqueness check, the equilibrated KKT least-squares solve)
-and :func:`harness.neutral.assembly.newton_positions` (the reduced route's poses), for one state, on the
-compiled joint equations of :mod:`harness.neutral.equation_kernels`.  Only the order of the floating-point
+and :func:`mbh._harness.neutral.assembly.newton_positions` (the reduced route's poses), for one state, on the
+compiled joint equations of :mod:`mbh._harness.neutral.equation_kernels`.  Only the order of the floating-point
 operations differs (the KKT system by its symmetric eigendecomposition instead of gelsd's SVD,
 the same cut-off); ``tests/neutral/test_reference_speed.py`` checks them against the numpy
 originals and the stored references.  Nothing here imports the in-house formulation
@@ -19,10 +19,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.neutral.equation_kernels import (combined_rows, compiled, cross, dot, jacobian, jacobian_of,
+from mbh._harness.neutral.equation_kernels import (combined_rows, compiled, cross, dot, jacobian, jacobian_of,
                                    residuals, rotations, row_gradients, row_rates,
                                    velocity_residuals, world_vector, wrap)
-from harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
 
 _LOAD_FORCE, _LOAD_TORQUE, _LOAD_AXIS_TORQUE, _LOAD_AXIS_FORCE, _LOAD_SPRING = 0, 1, 2, 3, 4
 _TORQUE_JOINTS = ("revolute", "cylindrical")
@@ -86,7 +86,7 @@ def mass_spread(mech: Mechanism) -> float:
     """Smallest over largest eigenvalue of the twist mass matrix, the same in every pose: the
     masses and principal moments (spatial) or moments about z (planar).  The eigenvalues of
     Zᵀ M Z for orthonormal Z lie between M's (Cauchy's interlacing), so a spread above
-    :data:`~harness.neutral.dynamics.UNIQUENESS_RATIO` makes every null space pass
+    :data:`~mbh._harness.neutral.dynamics.UNIQUENESS_RATIO` makes every null space pass
     :func:`is_unique`."""
     inertia = np.array([body.inertia for body in mech.bodies], dtype=float)
     moments = inertia[:, 2, 2] if mech.planar else np.linalg.eigvalsh(inertia).ravel()
@@ -116,7 +116,7 @@ def _add_loads(wrench, load_kind, load_bodies, load_vectors, load_scalars, posit
                angular_velocity, rotation):
     """Add every load to ``wrench`` (n_b, 2, 3): force at a point (vectors: force, point),
     torque (torque), actuation torque (value·axis) or force (value·axis at point), spring-damper
-    (points 1, 2; scalars k, c, L₀), as :func:`harness.neutral.dynamics.applied_wrenches`."""
+    (points 1, 2; scalars k, c, L₀), as :func:`mbh._harness.neutral.dynamics.applied_wrenches`."""
     for index in range(load_kind.shape[0]):
         kind = load_kind[index]
         one, two = load_bodies[index, 0], load_bodies[index, 1]
@@ -153,7 +153,7 @@ def _add_loads(wrench, load_kind, load_bodies, load_vectors, load_scalars, posit
 def mass_and_forces(masses, inertia, gravity, load_kind, load_bodies, load_vectors,
                     load_scalars, planar, position, quaternion, velocity, angular_velocity):
     """Mass matrix (n, n) and Q − [0; ω × J ω] (n,) in the twist coordinates, as
-    :func:`harness.neutral.dynamics.twist_mass_and_forces`."""
+    :func:`mbh._harness.neutral.dynamics.twist_mass_and_forces`."""
     n_bodies = position.shape[0]
     rotation = rotations(quaternion)
     wrench = np.zeros((n_bodies, 2, 3))
@@ -209,7 +209,7 @@ def _turned(quaternion, angular_velocity, h):
 def gamma(kind, bodies, vectors, rate, combine, position, quaternion, velocity,
           angular_velocity, difference_step, difference_turn):
     """γ = −Ġ ν (m_out,): the sixth-order central difference of the velocity residuals along
-    the motion, as :func:`harness.neutral.dynamics.gamma`."""
+    the motion, as :func:`mbh._harness.neutral.dynamics.gamma`."""
     fastest = np.abs(angular_velocity).max() if angular_velocity.size else 0.0
     step = min(difference_step, difference_turn / fastest) if fastest > 0.0 else difference_step
     total = np.zeros(combine.shape[0])
@@ -264,7 +264,7 @@ def is_unique(mass, jacobian, ratio):
     """Whether the mass matrix (n, n) is positive definite on the null space of the Jacobian
     (m, n) by the eigenvalue ratio ``ratio``, the null space cut at scipy.linalg.null_space's
     default (max(m, n)·ε × the largest singular value), as
-    :func:`harness.neutral.dynamics._check_unique`."""
+    :func:`mbh._harness.neutral.dynamics._check_unique`."""
     m, n = jacobian.shape
     _, s, vh, rank = _decomposition(jacobian, max(m, n) * np.finfo(np.float64).eps)
     if rank == n:
@@ -278,7 +278,7 @@ def is_unique(mass, jacobian, ratio):
 def kkt_solve(mass, jacobian, forces, rows, rcond):
     """Twist rates (n,) from the symmetrically equilibrated KKT system [[M, Gᵀ], [G, 0]] by
     least squares (singular values below rcond × the largest dropped), as
-    :func:`harness.neutral.dynamics.accelerations`.
+    :func:`mbh._harness.neutral.dynamics.accelerations`.
 
     The system is symmetric, so its singular values are the moduli of its eigenvalues: the
     least-norm solution V Λ⁺ Vᵀ b from the symmetric eigendecomposition is the one LAPACK's
@@ -406,7 +406,7 @@ def branch_rate(kind, bodies, vectors, combine, planar, position, quaternion, rc
 def branch_pose(kind, bodies, vectors, offset, rate, wrapped, combine, shift, wrap_out, planar,
                 position, quaternion, tolerance, max_iterations, polish_steps):
     """Newton–Raphson on the body poses with least-squares steps in body twists, as
-    :func:`harness.neutral.assembly.newton_positions` (same iteration, stopping rule and polishing
+    :func:`mbh._harness.neutral.assembly.newton_positions` (same iteration, stopping rule and polishing
     steps; scipy's default cut-off ε of lstsq).
 
     Parameters

@@ -1,17 +1,17 @@
 """Compiled (numba) joint equations of the neutral model for one state: the rows, Jacobian and
-velocity residuals of :mod:`harness.neutral.equations`, with the joint rows flattened into a
-numeric table (:class:`RowTable`), for the right-hand sides of :mod:`harness.neutral.dynamics_kernels`.
+velocity residuals of :mod:`mbh._harness.neutral.equations`, with the joint rows flattened into a
+numeric table (:class:`RowTable`), for the right-hand sides of :mod:`mbh._harness.neutral.dynamics_kernels`.
 
 Only the order of the floating-point operations differs from the numpy originals
 (``tests/neutral/test_reference_speed.py`` compares them).  Nothing here imports the in-house
 formulation (docs/design.md, Layers).
 
-Row table: one entry per joint-equation row, in :class:`~harness.neutral.equations.JointEquations`
+Row table: one entry per joint-equation row, in :class:`~mbh._harness.neutral.equations.JointEquations`
 order: ``kind`` (m,) one of the ``_ROW_*`` codes, ``bodies`` (m, 2) body indices (−1: ground),
 ``vectors`` (m, 3, 3) body-frame points/axes (see :func:`row_gradients`), ``offset`` and
 ``rate`` (m,) the driver terms (rad or m, rad/s or m/s), ``wrapped`` (m,) whether the row is an
 angle wrapped to (−π, π].  The routes' rows are ``combine @ base − shift`` with ``wrap_out``
-(the branch relations of :class:`~harness.references.routes.BranchEquations`).
+(the branch relations of :class:`~mbh._harness.references.routes.BranchEquations`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from harness.neutral.equations import (JointEquations, _AxisTilt, _CrossAxes, _PlanarAngle,
+from mbh._harness.neutral.equations import (JointEquations, _AxisTilt, _CrossAxes, _PlanarAngle,
                                      _PointGap, _Projection, _Twist)
 
 _ROW_GAP, _ROW_PROJECTION, _ROW_TILT_NORMAL, _ROW_TILT_BINORMAL = 0, 1, 2, 3
@@ -125,7 +125,7 @@ def dot(a, b):
 
 @compiled
 def wrap(angle):
-    """An angle wrapped to (−π, π], rad (:func:`harness.model.outputs.wrap_angle`)."""
+    """An angle wrapped to (−π, π], rad (:func:`mbh._harness.model.outputs.wrap_angle`)."""
     return np.pi - (np.pi - angle) % (2.0 * np.pi)
 
 
@@ -308,7 +308,7 @@ def velocity_residuals(kind, bodies, vectors, rate, combine, position, quaternio
 
 class CompiledRows:
     """A :class:`RowTable` behind the interface of
-    :class:`~harness.references.routes.BranchEquations` for one state (no leading sample axes).
+    :class:`~mbh._harness.references.routes.BranchEquations` for one state (no leading sample axes).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 """The neutral model's own joint equations, evaluated on world body states (docs/design.md, rule 2).
 
-Written from the joint definitions of :class:`harness.model.mechanism.Joint` alone (points, axes and normals
+Written from the joint definitions of :class:`mbh._harness.model.mechanism.Joint` alone (points, axes and normals
 in body frames); the in-house kernels are an independent second implementation, and the two are
 tested against each other.  Everything here is numpy, vectorised over any leading sample axes.
 
@@ -50,8 +50,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from harness.model.mechanism import Joint, Mechanism
-from harness.model.outputs import body_rotations, wrap_angle
+from mbh._harness.model.mechanism import Joint, Mechanism
+from mbh._harness.model.outputs import body_rotations, wrap_angle
 
 _Z = np.array([0.0, 0.0, 1.0])
 _X = np.array([1.0, 0.0, 0.0])

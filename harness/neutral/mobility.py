@@ -1,7 +1,7 @@
 """Rank analysis of the neutral joint equations at one configuration (Frączek & Wojtyra 2009, §1.3).
 
 * Grübler–Kutzbach mobility: w = 6n − Σ (relative freedoms removed) in space (Frączek & Wojtyra 2009, eq. 1.39),
-  w = 3n − Σ in the plane (eq. 1.40), from the joint classes of :mod:`harness.model.mechanism`.
+  w = 3n − Σ in the plane (eq. 1.40), from the joint classes of :mod:`mbh._harness.model.mechanism`.
 * Rank mobility: w = N − rank J (eq. 1.48) with J the Jacobian of the joint rows with respect to
   the body twists (N = 6 per spatial body, 3 per planar body; no Euler-parameter normalisation rows,
   since twists have no redundant coordinates).
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from harness.neutral.equations import JointEquations
-from harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
 
 #: A pivot |R_kk| of the QR factorisation of Jᵀ below this fraction of the largest counts as zero.
 #: Round-off puts dependent rows' pivots at ~1e-16·|J| (≤ 1e-15 on the shipped scenes' redundant

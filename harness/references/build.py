@@ -27,11 +27,11 @@ other routes, :data:`BRANCH_ROUTE_A` (every
 body, index-1 Newton–Euler with the branch's rows) and :data:`BRANCH_ROUTE_B` (the driver
 coordinate alone, reduced along the branch), both DOP853 on the harness's neutral joint equations: the
 RK4/RKN4 routes lose the branch's accuracy at every passage, see
-:mod:`harness.references.routes`.  Either way route A must also satisfy the
+:mod:`mbh._harness.references.routes`.  Either way route A must also satisfy the
 plain joint equations within the agreement limit.
 
 Shipped scenes come with their references (``scenarios/references``); a reference built here goes
-to the user cache (:mod:`harness.store.reference_files`: ``MBH_CACHE_DIR`` overrides both); a file is
+to the user cache (:mod:`mbh._harness.store.reference_files`: ``MBH_CACHE_DIR`` overrides both); a file is
 keyed by the scenario's content hash and :data:`REFERENCE_VERSION`, so editing a scenario, or
 bumping the version when the formulation changes, rebuilds it.  On load the stored metadata must
 match the scenario and the builder (name, content hash, version, grid step, routes, agreement
@@ -39,9 +39,9 @@ within the limit, arrays on the grid), or the reference is rebuilt; files are wr
 (unique temporary file, ``os.replace``), so processes of a pool can share the cache.
 
 A build takes seconds to minutes (docs/measurements.md, "References").  On a terminal it shows a
-progress bar with the time left (:class:`~harness.common.progress.StageProgress`), estimated from
+progress bar with the time left (:class:`~mbh._harness.common.progress.StageProgress`), estimated from
 a pilot run of each stage over the first :data:`PILOT_FRACTION` of the duration.  Each stage is
-also said on the ``mbh`` logger (:mod:`harness.common.waits`: the command line's stderr lines),
+also said on the ``mbh`` logger (:mod:`mbh._harness.common.waits`: the command line's stderr lines),
 with the time left; where neither bar nor lines are shown, no pilot runs.
 """
 
@@ -53,18 +53,18 @@ import time
 
 import numpy as np
 
-from harness.references.routes import ROUTE_TOLERANCE, BranchRouteError, full_route, reduced_route
-from harness.model.mechanism import Mechanism
-from harness.model.outputs import output_series
-from harness.model.timegrid import GRID_STEP
-from harness.model.trajectory import Trajectory
-from harness.common.errors import MbhError
-from harness.common import waits
-from harness.common.progress import StageProgress, progress_wanted
-from harness.store.reference_files import (AGREEMENT_LIMIT, REFERENCE_VERSION, cache_dir,
+from mbh._harness.references.routes import ROUTE_TOLERANCE, BranchRouteError, full_route, reduced_route
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.timegrid import GRID_STEP
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common import waits
+from mbh._harness.common.progress import StageProgress, progress_wanted
+from mbh._harness.store.reference_files import (AGREEMENT_LIMIT, REFERENCE_VERSION, cache_dir,
                                            read_reference, reference_grid, refusal_path,
                                            replace_atomically, write_reference)
-from harness.measure.metrics import constraint_violations
+from mbh._harness.measure.metrics import constraint_violations
 
 #: Share of the duration a pilot run covers to estimate a stage's cost (progress bar only).
 PILOT_FRACTION = 0.02
@@ -73,7 +73,7 @@ ROUTE_A = ("rk4+direct:proj_tol=1e-14", 5e-5)
 ROUTE_B = ("rkn4+direct:proj_tol=1e-14", 5e-5)
 DAE_CHECK = ("ida:rtol=1e-13,atol=1e-13,max_steps=5000000", GRID_STEP)
 #: The routes of a scene that declares the branch it stays on (``[reference]
-#: equal_joint_angles``): (route, DOP853 tolerance), see :mod:`harness.references.routes`.
+#: equal_joint_angles``): (route, DOP853 tolerance), see :mod:`mbh._harness.references.routes`.
 #: The full route is route A (the reference): it is the closer of the two to the
 #: one-degree-of-freedom model, since the reduced route's θ̈ carries the finite-difference noise
 #: of γ times θ̇² (figures: docs/measurements.md, section "References").
@@ -116,7 +116,7 @@ def routes(mech: Mechanism) -> tuple[tuple[str, float], tuple[str, float]]:
 def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray,
                t_end: float | None = None) -> Trajectory:
     """``route`` sampled on ``grid`` up to ``t_end`` (s; the scene's duration unless given)."""
-    from adapters import get_adapter
+    from mbh._adapters import get_adapter
 
     method, step = route
     if method in _BRANCH_ROUTES:

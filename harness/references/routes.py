@@ -8,7 +8,7 @@ branches where the cranks turn differently.  A route in full coordinates that sa
 a residual ε sees, near the crossing, the hyperbola ψ·b = ε (ψ along the branch, b across it)
 instead of the crossing: it leaves the branch by ~√ε, and its velocity projection there forces
 transverse rates of the order of the speed along the branch.  On ``double_fourbar`` the
-rk4+direct and rkn4+direct routes of :mod:`harness.references.build` therefore disagree far beyond
+rk4+direct and rkn4+direct routes of :mod:`mbh._harness.references.build` therefore disagree far beyond
 the agreement limit, the more so the smaller the step (more projections near the crossing;
 figures: docs/measurements.md, section "References").
 
@@ -25,13 +25,13 @@ branch is a smooth manifold, and two independent routes are well posed:
   (G ν' = e_θ; G a₀ = γ(ν'), Frączek & Wojtyra 2009, eq. 1.62); the equation of motion projected on ν'
   (Kane's / the virtual-power form):  θ̈ = ν'ᵀ (Q − M a₀ θ̇²) / (ν'ᵀ M ν').  Integrated by DOP853.
 * :func:`full_route` — every body's pose and twist: the index-1 Newton–Euler equations of
-  :mod:`harness.neutral.dynamics` with the branch rows among the constraints and Baumgarte's
+  :mod:`mbh._harness.neutral.dynamics` with the branch rows among the constraints and Baumgarte's
   stabilisation against drift (which changes nothing on the constraints), integrated by DOP853.
 
 Both use only the harness's neutral joint equations, never the in-house kernels.  Their
 right-hand sides (and the reduced route's Newton–Raphson) run compiled
-(:mod:`harness.neutral.dynamics_kernels` on :mod:`harness.neutral.equation_kernels`): the same equations as
-:mod:`harness.neutral.equations` and :mod:`harness.neutral.dynamics` in another operation order,
+(:mod:`mbh._harness.neutral.dynamics_kernels` on :mod:`mbh._harness.neutral.equation_kernels`): the same equations as
+:mod:`mbh._harness.neutral.equations` and :mod:`mbh._harness.neutral.dynamics` in another operation order,
 under scipy's DOP853 (its own per-step cost is a small part of a route beside them), and must
 agree with the interpreted equations' references within the agreement limit (figures:
 docs/measurements.md, section "References").
@@ -49,17 +49,17 @@ import time
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from harness.neutral.assembly import MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble
-from harness.neutral.equations import JointEquations, body_twists, twist_vector
-from harness.model.mechanism import Mechanism
-from harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
+from mbh._harness.neutral.assembly import MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble
+from mbh._harness.neutral.equations import JointEquations, body_twists, twist_vector
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
                                       UNIQUENESS_RATIO, IndeterminateAccelerations, accelerations)
-from harness.neutral.equation_kernels import CompiledRows, row_table
-from harness.neutral.dynamics_kernels import (body_table, branch_acceleration, branch_pose, branch_rate,
+from mbh._harness.neutral.equation_kernels import CompiledRows, row_table
+from mbh._harness.neutral.dynamics_kernels import (body_table, branch_acceleration, branch_pose, branch_rate,
                                      full_rates, mass_spread)
-from harness.model.outputs import wrap_angle
-from harness.model.trajectory import BodyStates, Trajectory
-from harness.common.errors import MbhError
+from mbh._harness.model.outputs import wrap_angle
+from mbh._harness.model.trajectory import BodyStates, Trajectory
+from mbh._harness.common.errors import MbhError
 
 #: DOP853 tolerance of both routes (relative and absolute, on θ in rad and θ̇ in rad/s, or on
 #: positions in m, quaternions and twists).
@@ -79,7 +79,7 @@ class BranchEquations:
 
     A relation (a, b) is the coordinate of joint b minus that of joint a minus its value at the
     start, wrapped to (−π, π] (rad).  Same interface as
-    :class:`~harness.neutral.equations.JointEquations` (``residuals``, ``jacobian``,
+    :class:`~mbh._harness.neutral.equations.JointEquations` (``residuals``, ``jacobian``,
     ``velocity_residuals``, ``m``); the driver row is the driver's coordinate minus
     :attr:`drive` (rad or m, from the reference configuration) and is the last row.
 
@@ -126,7 +126,7 @@ class BranchEquations:
         self._with_driver = with_driver
 
     def compiled(self) -> CompiledRows:
-        """The same rows, compiled (:mod:`harness.neutral.equation_kernels`), for one state at a time;
+        """The same rows, compiled (:mod:`mbh._harness.neutral.equation_kernels`), for one state at a time;
         its ``drive`` starts at 0."""
         wrapped = np.zeros(self.m, dtype=bool)
         wrapped[self._branch] = True
@@ -161,7 +161,7 @@ def _velocities(mech: Mechanism, twist: np.ndarray) -> tuple[np.ndarray, np.ndar
 
 class _BranchKinematics:
     """q(θ), ν'(θ) and a₀(θ) along the branch, warm-started from the last configuration (the
-    rows compiled, :mod:`harness.neutral.dynamics_kernels`)."""
+    rows compiled, :mod:`mbh._harness.neutral.dynamics_kernels`)."""
 
     def __init__(self, mech: Mechanism, start: BodyStates):
         self.mech = mech
@@ -185,7 +185,7 @@ class _BranchKinematics:
 
     def pose(self, theta: float) -> tuple[np.ndarray, np.ndarray]:
         """Positions (n_bodies, 3) and quaternions (n_bodies, 4) at driver coordinate θ, by
-        :func:`~harness.neutral.dynamics_kernels.branch_pose` (harness.neutral.assembly's Newton–Raphson)."""
+        :func:`~mbh._harness.neutral.dynamics_kernels.branch_pose` (mbh._harness.neutral.assembly's Newton–Raphson)."""
         self.equations.drive = theta
         position, quaternion, residual, converged = branch_pose(
             *self.equations.arrays(), self.mech.planar, *self._last, self.tolerance,

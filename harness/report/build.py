@@ -1,8 +1,8 @@
 """Build a run's report: collect everything from the stored run into a :class:`Report`, then write
-it as one self-contained HTML file (:func:`render_html`) and/or a PDF (:mod:`harness.report.pdf`).
+it as one self-contained HTML file (:func:`render_html`) and/or a PDF (:mod:`mbh._harness.report.pdf`).
 
-Only stored results are read (:class:`harness.store.runs.RunStore`: case rows, sweeps, trajectories,
-the manifest) plus the seed table stored beside the run (:mod:`harness.report.seed_compare`);
+Only stored results are read (:class:`mbh._harness.store.runs.RunStore`: case rows, sweeps, trajectories,
+the manifest) plus the seed table stored beside the run (:mod:`mbh._harness.report.seed_compare`);
 nothing is re-run.  Drawings of a mechanism need its scenario file as it was when the run was
 made: a scenario whose content hash differs from the run's manifest (or that no longer loads) is
 drawn nowhere, and the report says so.  References come from the reference cache the run filled.
@@ -24,16 +24,16 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from harness.common.locations import checkout, user_data
-from harness.model import scenario as scenarios
-from harness.store.reference_files import stored_reference
-from harness.report import failures, figures, mechanism, seed_compare, summary
-from harness.report.summary import Table
-from harness.model.scenario import ScenarioError
-from harness.measure.verdict import DEFAULT_ACCURACY
-from harness.store.compare import comparable_calibrations, compare_runs
-from harness.store.runs import RunStore, latest_run
-from harness.common.errors import MbhError
+from mbh._harness.common.locations import checkout, user_data
+from mbh._harness.model import scenario as scenarios
+from mbh._harness.store.reference_files import stored_reference
+from mbh._harness.report import failures, figures, mechanism, seed_compare, summary
+from mbh._harness.report.summary import Table
+from mbh._harness.model.scenario import ScenarioError
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY
+from mbh._harness.store.compare import comparable_calibrations, compare_runs
+from mbh._harness.store.runs import RunStore, latest_run
+from mbh._harness.common.errors import MbhError
 
 #: Output formats :func:`build_report` writes.
 FORMATS = ("html", "pdf")
@@ -395,7 +395,7 @@ def build_report(run_id: str, against: str | None = None, formats=FORMATS,
     ----------
     run_id, against : str
         The run, and the previous run to compare with (None: no comparison; ``"previous"``:
-        :func:`harness.store.runs.latest_run` of the campaign before ``run_id``).
+        :func:`mbh._harness.store.runs.latest_run` of the campaign before ``run_id``).
     formats : iterable of str
         Any of :data:`FORMATS`.
     out, root : Path, optional
@@ -417,7 +417,7 @@ def build_report(run_id: str, against: str | None = None, formats=FORMATS,
     out.mkdir(parents=True, exist_ok=True)
     written = {}
     if "pdf" in formats:
-        from harness.report.pdf import render_pdf
+        from mbh._harness.report.pdf import render_pdf
 
         written["pdf"] = out / "report.pdf"
         written["pdf"].write_bytes(render_pdf(report))

@@ -14,7 +14,7 @@ sweep covers it.  Per scene the section holds
   near-singular positions, which fail there, which engines cannot represent the scene, how the
   largest stable step of explicit integration compares with implicit integration.
 
-Near-singular positions and failures *at* them are defined in :mod:`harness.neutral.conditioning` (the
+Near-singular positions and failures *at* them are defined in :mod:`mbh._harness.neutral.conditioning` (the
 same definition labels a failed run's reason).  Only the joint rows count: a dead centre of a slider-crank, where Φ_q keeps its rank and only the
 driven coordinate stops determining the others, is not a near-singular position here.
 """
@@ -30,16 +30,16 @@ import numpy as np
 import pandas as pd
 from matplotlib.lines import Line2D
 
-from harness.model import scenario as scenarios
-from harness.neutral.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED, Conditioning,
+from mbh._harness.model import scenario as scenarios
+from mbh._harness.neutral.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED, Conditioning,
                                   conditioning, nearest_passage)
-from harness.model.mechanism import Mechanism
-from harness.store.reference_files import stored_reference
-from harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure, apply_style,
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.store.reference_files import stored_reference
+from mbh._harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure, apply_style,
                                   is_missing, new_figure, outcome, plain, render)
-from harness.report.summary import Table
-from harness.model.scenario import ScenarioError
-from harness.common.numbers import as_float, float_or_nan
+from mbh._harness.report.summary import Table
+from mbh._harness.model.scenario import ScenarioError
+from mbh._harness.common.numbers import as_float, float_or_nan
 
 #: Scenario tag that puts a scene into the section.
 HARD_TAG = "hard"
@@ -446,7 +446,7 @@ def section_scenes(cases: pd.DataFrame, sweeps: pd.DataFrame, accuracy: float, m
     Parameters
     ----------
     cases, sweeps : DataFrame
-        The run's case and sweep rows (:meth:`harness.store.runs.RunStore.cases`, ``sweeps``).
+        The run's case and sweep rows (:meth:`mbh._harness.store.runs.RunStore.cases`, ``sweeps``).
     accuracy : float
         The campaign's threshold on the main output, rad or m.
     manifest : dict

@@ -1,7 +1,7 @@
 """Report figures drawn from stored campaign results: work-precision diagrams, stability maps and
 the time histories of one case (issue 11).
 
-Every function returns a :class:`~harness.report.style.Figure` (deterministic SVG and PDF, a
+Every function returns a :class:`~mbh._harness.report.style.Figure` (deterministic SVG and PDF, a
 caption and a text alternative).  Nothing computed is hidden: a case that did not end ``ok``, or
 that has no wall time or no value, is drawn at the edge of the plot and marked by its status.
 """
@@ -17,18 +17,18 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch, Rectangle
 from matplotlib.colors import BoundaryNorm, ListedColormap
 
-from harness.measure.energy import energy_balance, energy_scale
-from harness.neutral.equations import JointEquations
-from harness.measure.metrics import lever_length, violation_series
-from harness.model.mechanism import Mechanism
-from harness.model.outputs import output_series
-from harness.common.numbers import float_or_nan
-from harness.neutral.mobility import independent_rows
-from harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
+from mbh._harness.measure.energy import energy_balance, energy_scale
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.measure.metrics import lever_length, violation_series
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.outputs import output_series
+from mbh._harness.common.numbers import float_or_nan
+from mbh._harness.neutral.mobility import independent_rows
+from mbh._harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
                                   apply_style, new_figure, no_data, outcome, plain,
                                   render, series_style)
-from harness.model.timegrid import reference_indices
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.timegrid import reference_indices
+from mbh._harness.model.trajectory import Trajectory
 
 #: The y quantities of a work-precision diagram → axis label.
 Y_LABELS = {
@@ -39,7 +39,7 @@ Y_LABELS = {
 #: Marker of a point drawn off the chart, by its label (a status, or why an ok case has no place).
 EDGE_MARKERS = {"diverged": "X", "failed": "v", "crashed": "*", "timeout": "P",
                 "unsupported": "s", "no value": "o", "no time": "d", "zero": "^"}
-#: Unit of each output kind (harness.model.mechanism.Output).
+#: Unit of each output kind (mbh._harness.model.mechanism.Output).
 OUTPUT_UNITS = {"joint_angle": "rad", "joint_rate": "rad/s", "joint_position": "m",
                 "position": "m", "velocity": "m/s", "point_position": "m",
                 "point_velocity": "m/s"}
@@ -273,7 +273,7 @@ def stability_map(cases: pd.DataFrame, sweeps: pd.DataFrame, scenario: str,
                   accuracy: float) -> Figure:
     """Outcome of every case of a scenario, methods × step sizes, with the stability sweep.
 
-    Cells are coloured and lettered by :func:`~harness.report.style.outcome` with ``accuracy``
+    Cells are coloured and lettered by :func:`~mbh._harness.report.style.outcome` with ``accuracy``
     (rad or m on the main output); white cells were not run.  The largest stable dt the sweep
     found for a method is outlined in bold (or marked ◆ between columns when the sweep's step is
     not a column) and written at the row's right end.
@@ -376,7 +376,7 @@ def _mark_sweeps(axes, sweep: pd.DataFrame, rows: list, columns: list) -> dict:
 def jacobian_condition(mech: Mechanism, trajectory: Trajectory) -> np.ndarray:
     """Condition number of [independent joint rows; driver row] at every sample, shape (n,).
 
-    The measure of :func:`harness.neutral.mobility.rank_analysis` (σ_max/σ_min of that system, σ_min the
+    The measure of :func:`mbh._harness.neutral.mobility.rank_analysis` (σ_max/σ_min of that system, σ_min the
     min(rows, columns)-th singular value; ∞ where it is zero), with the independent rows chosen
     once, at the first sample (the start's rank), so that a rank lost later shows as a condition
     growing without bound rather than as a change of rows.
@@ -408,8 +408,8 @@ def time_history(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
 
     Panels: each output (the case in colour over the reference in grey); the output errors
     |y − y_ref| (log); the constraint violation (joint gap and orientation residual × lever
-    length ℓ, :func:`harness.measure.metrics.violation_series`, m, log); the energy-balance error
-    (:func:`harness.measure.energy.energy_balance`, relative to the reference's energy scale, or in J
+    length ℓ, :func:`mbh._harness.measure.metrics.violation_series`, m, log); the energy-balance error
+    (:func:`mbh._harness.measure.energy.energy_balance`, relative to the reference's energy scale, or in J
     without one; log); the condition number of the reference's constraint Jacobian
     (:func:`jacobian_condition`; the case's own without a reference; log).  A run that did not
     end ok has its failure time marked on every panel.

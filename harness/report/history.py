@@ -9,9 +9,9 @@ time and engine versions; per run and case its status, errors and calibrated wal
    counted at the first run with the new status (a status is observed, not estimated: confidence
    1);
 2. **accuracy**: steps in the main-output error, the constraint violation and the energy error
-   (:data:`harness.report.changepoints.ERROR`, over the runs where the case ended ``ok``);
+   (:data:`mbh._harness.report.changepoints.ERROR`, over the runs where the case ended ``ok``);
 3. **time**: steps in the calibrated wall time (wall time / the run's calibration time,
-   :data:`harness.report.changepoints.TIME`), only beyond the series' measured noise.
+   :data:`mbh._harness.report.changepoints.TIME`), only beyond the series' measured noise.
 
 A change is *open* when the case's latest level is still beyond the rule's least factor from the
 level before the change (a regression not undone since).  Engine versions come from the case rows
@@ -27,9 +27,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from harness.common.errors import MbhError
-from harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
-from harness.store.runs import RunStore, list_runs
+from mbh._harness.common.errors import MbhError
+from mbh._harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
+from mbh._harness.store.runs import RunStore, list_runs
 
 __all__ = ["QUANTITIES", "STATUS", "History", "HistoryError", "load_history", "find_changes",
            "version_changes", "open_regressions"]

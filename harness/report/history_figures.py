@@ -1,7 +1,7 @@
 """The trend figure of one scenario × engine × method family over a campaign's runs.
 
 Three panels share the run axis.  The first holds the errors (main output, constraint violation,
-energy: :data:`harness.report.history.QUANTITIES`), the second the calibrated wall time, each
+energy: :data:`mbh._harness.report.history.QUANTITIES`), the second the calibrated wall time, each
 value divided by the case's own median over the runs where it ended ``ok`` (so cases of every step
 size share one axis and a step shows as a move away from 1); the third the number of cases that
 ended ``ok`` per run.  A case with a change in a quantity is drawn as a line of its own with each
@@ -16,8 +16,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullLocator
 
-from harness.report.history import QUANTITIES, STATUS
-from harness.report.style import Figure, new_figure, plain, render, series_style
+from mbh._harness.report.history import QUANTITIES, STATUS
+from mbh._harness.report.style import Figure, new_figure, plain, render, series_style
 
 #: Colours of a regression and an improvement (Okabe–Ito vermillion and bluish green).
 KIND_COLOURS = {"regression": "#D55E00", "improvement": "#009E73"}
@@ -130,13 +130,13 @@ def trend_figure(title: str, runs: pd.DataFrame, cases: pd.DataFrame, changes: p
     title : str
         ``scenario · adapter · family``.
     runs : DataFrame
-        :attr:`harness.report.history.History.runs`.
+        :attr:`mbh._harness.report.history.History.runs`.
     cases : DataFrame
         The group's rows of :attr:`History.cases` (one engine).
     changes : DataFrame
-        The group's rows of :func:`harness.report.history.find_changes`.
+        The group's rows of :func:`mbh._harness.report.history.find_changes`.
     upgrades : DataFrame
-        The engine's rows of :func:`harness.report.history.version_changes`.
+        The engine's rows of :func:`mbh._harness.report.history.version_changes`.
     """
     n = len(runs)
     figure = new_figure(8.0, 6.0)

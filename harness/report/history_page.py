@@ -2,9 +2,9 @@
 conventions: jinja2 template, inline SVG figures, the report's CSS and sortable tables).
 
 It shows the runs (commit, calibration, engine versions, a link to each run's report where one
-was built), the changes :func:`harness.report.history.find_changes` found (open regressions
+was built), the changes :func:`mbh._harness.report.history.find_changes` found (open regressions
 first, each linking to the report of its first run), and one trend figure
-(:func:`harness.report.history_figures.trend_figure`) per scenario × engine × method family,
+(:func:`mbh._harness.report.history_figures.trend_figure`) per scenario × engine × method family,
 with filters by scenario, engine and "changed only".
 """
 
@@ -16,12 +16,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from harness.report.build import _asset, _environment_for_template, build_time, reports_root
-from harness.report.history import (QUANTITIES, STATUS, History, find_changes, load_history,
+from mbh._harness.report.build import _asset, _environment_for_template, build_time, reports_root
+from mbh._harness.report.history import (QUANTITIES, STATUS, History, find_changes, load_history,
                                     version_changes)
-from harness.report.history_figures import method_family, trend_figure
-from harness.report.style import Figure
-from harness.store.runs import results_root
+from mbh._harness.report.history_figures import method_family, trend_figure
+from mbh._harness.report.style import Figure
+from mbh._harness.store.runs import results_root
 
 __all__ = ["HistoryPage", "TrendView", "collect_history", "render_history", "build_history",
            "report_link", "HISTORY_FILE"]
@@ -148,7 +148,7 @@ def build_history(campaign: str | None = None, root: Path | None = None,
 
     Raises
     ------
-    harness.report.history.HistoryError
+    mbh._harness.report.history.HistoryError
         When the root holds no finished run of the campaign.
     """
     history = history if history is not None else load_history(campaign, root)

@@ -24,11 +24,11 @@ from xml.sax.saxutils import escape, quoteattr
 
 import numpy as np
 
-from harness.model.mechanism import GROUND, Mechanism, characteristic_length
-from harness.model.outputs import body_rotations
-from harness.report.style import (PALETTE, REFERENCE_COLOUR, Figure, apply_style, new_figure,
+from mbh._harness.model.mechanism import GROUND, Mechanism, characteristic_length
+from mbh._harness.model.outputs import body_rotations
+from mbh._harness.report.style import (PALETTE, REFERENCE_COLOUR, Figure, apply_style, new_figure,
                                   no_data, plain, render)
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 
 #: The key of ``trajectories`` drawn in grey as the reference.
 REFERENCE_KEY = "reference"

@@ -20,7 +20,7 @@ from reportlab.platypus import (KeepTogether, PageBreak, Paragraph, Preformatted
                                 SimpleDocTemplate, Table as PdfTable, TableStyle)
 from svglib.svglib import svg2rlg
 
-from harness.report.summary import Table, cell_text
+from mbh._harness.report.summary import Table, cell_text
 
 #: Page margins, pt.
 MARGIN = 15 * mm
@@ -173,7 +173,7 @@ def _story(report, width: float) -> list:
 
 
 def render_pdf(report) -> bytes:
-    """The PDF bytes of ``report`` (:class:`harness.report.build.Report`)."""
+    """The PDF bytes of ``report`` (:class:`mbh._harness.report.build.Report`)."""
     buffer = io.BytesIO()
     document = SimpleDocTemplate(
         buffer, pagesize=A4, leftMargin=MARGIN, rightMargin=MARGIN, topMargin=MARGIN,

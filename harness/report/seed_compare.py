@@ -1,7 +1,7 @@
 """The seed's published figures (Rouvinen 2003, ch. 7, tables 9–11) next to our re-run of its setup.
 
 Published figures: ``harness/data/rouvinen2003_results.toml`` (transcribed with its citation).
-Ours: the rows of ``mbh seed-table --json`` (:func:`harness.jobs.seedtable.seed_rows`), stored beside a
+Ours: the rows of ``mbh seed-table --json`` (:func:`mbh._harness.jobs.seedtable.seed_rows`), stored beside a
 run as ``<run folder>/seed_table.json`` by ``make report``; the report never re-runs them.
 
 Nothing here is tuned to match: a row shows theirs, ours and ours / theirs, and :data:`NOTES`
@@ -15,8 +15,8 @@ import statistics
 import tomllib
 from pathlib import Path
 
-from harness.common.errors import MbhError
-from harness.report.summary import Table
+from mbh._harness.common.errors import MbhError
+from mbh._harness.report.summary import Table
 
 #: The published results, as shipped with the package.
 PUBLISHED_PATH = Path(__file__).resolve().parent.parent / "data" / "rouvinen2003_results.toml"

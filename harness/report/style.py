@@ -27,7 +27,7 @@ from xml.sax.saxutils import escape
 import matplotlib
 from matplotlib.figure import Figure as MplFigure
 
-from harness.common.numbers import is_missing
+from mbh._harness.common.numbers import is_missing
 
 #: Okabe–Ito colours for lines, in the order series take them (yellow left out: too light).
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")

@@ -1,4 +1,4 @@
-"""The report's tables, computed from a stored run's case rows (:meth:`harness.store.runs.RunStore.cases`).
+"""The report's tables, computed from a stored run's case rows (:meth:`mbh._harness.store.runs.RunStore.cases`).
 
 Every table is a :class:`Table` of raw values (str, int, float or None); the HTML and PDF
 renderers format the cells with :func:`cell_text` and sort numeric columns by value.
@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from harness.model.trajectory import STATUSES
+from mbh._harness.model.trajectory import STATUSES
 
 #: Accuracy levels of the summary, rad or m on the main output (every decade 1e-2 … 1e-10).
 ACCURACY_LEVELS = tuple(10.0 ** -k for k in range(2, 11))
@@ -198,7 +198,7 @@ def failures_table(cases: pd.DataFrame) -> Table:
 def changes_table(changes: pd.DataFrame) -> Table:
     """The cases that changed class between the previous run and this one.
 
-    ``changes`` is :func:`harness.store.compare.compare_runs` (previous run as ``a``, this run as ``b``).
+    ``changes`` is :func:`mbh._harness.store.compare.compare_runs` (previous run as ``a``, this run as ``b``).
     """
     changed = changes[changes["change"] != "unchanged"]
     counts = changes["change"].value_counts()

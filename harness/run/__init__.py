@@ -3,6 +3,6 @@ build to verdict (``case``), a case specification to its stored row (``row``), t
 sweep (``sweep``), isolated worker processes and Dask (``executor``) and a whole campaign into
 the store (``campaign``).
 
-May import: every layer below it (:mod:`harness.common` … :mod:`harness.references`) and the
+May import: every layer below it (:mod:`mbh._harness.common` … :mod:`mbh._harness.references`) and the
 adapter registry.
 """

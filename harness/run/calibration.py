@@ -1,4 +1,4 @@
-"""A run's machine-speed figure (:mod:`harness.common.machine_speed`), measured where the run
+"""A run's machine-speed figure (:mod:`mbh._harness.common.machine_speed`), measured where the run
 has a core to spare, so that it costs the run no time of its own:
 
 * locally, while the warm template starts (its imports keep one core busy and leave this process
@@ -8,7 +8,7 @@ has a core to spare, so that it costs the run no time of its own:
   beside the other cases.
 
 Either way it runs beside one busy core.  The run stores the figure with the workload that measured
-it (:meth:`harness.store.runs.RunStore.set_calibration`; :func:`store_figure`).
+it (:meth:`mbh._harness.store.runs.RunStore.set_calibration`; :func:`store_figure`).
 """
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from harness.common.machine_speed import machine_speed_s, workload_name
-from harness.run.spec import CaseSpec
+from mbh._harness.common.machine_speed import machine_speed_s, workload_name
+from mbh._harness.run.spec import CaseSpec
 
 #: The calibration case's identity for the executor (its row is not stored with the cases).
 CALIBRATION = CaseSpec("calibration", "machine-speed", "solve_ivp+lu", 1.0, 1.0)
@@ -44,7 +44,7 @@ class WithCalibration:
 
 def store_figure(store, row: dict, say) -> None:
     """Store the figure of :data:`CALIBRATION`'s ``row`` in ``store`` (a
-    :class:`~harness.store.runs.RunStore`); a calibration that did not end ``ok`` is reported
+    :class:`~mbh._harness.store.runs.RunStore`); a calibration that did not end ``ok`` is reported
     through ``say`` and leaves the run without a figure."""
     seconds = row.get("wall_time_s")
     if row.get("status") == "ok" and seconds is not None and math.isfinite(seconds) and seconds > 0:

@@ -6,20 +6,20 @@ Stages of :func:`run_campaign`, in order:
    workers only read the cache; a refused reference (``ReferenceBuildError``) means that scenario's
    cases run without one (their rows say ``reference = "none: <reason>"``);
 2. the run folder is created, or reopened with ``resume`` (its stored cases are skipped);
-3. the machine-speed figure (:mod:`harness.common.machine_speed`: a fixed numpy and scipy
+3. the machine-speed figure (:mod:`mbh._harness.common.machine_speed`: a fixed numpy and scipy
    workload) is measured in this process while the warm template starts, or else as the first
-   case of the next stage (:mod:`harness.run.calibration`), and stored with the run (times of
+   case of the next stage (:mod:`mbh._harness.run.calibration`), and stored with the run (times of
    different runs compare as ratios to it);
-4. the cases run through :func:`harness.run.executor.execute` (one fresh process each) and are stored
-   as they finish; with ``reuse`` an identical case already in the :class:`~harness.store.runs.CaseCache`
+4. the cases run through :func:`mbh._harness.run.executor.execute` (one fresh process each) and are stored
+   as they finish; with ``reuse`` an identical case already in the :class:`~mbh._harness.store.runs.CaseCache`
    (same scenario content, engine version, method, step and duration, computed by the same code
    under the same bounds and accuracy) is copied instead of run, and every run case is offered
    to the cache;
-5. the optional stability sweep (:mod:`harness.run.sweep`) runs through the same executor;
+5. the optional stability sweep (:mod:`mbh._harness.run.sweep`) runs through the same executor;
 6. the run is marked ``complete``.
 
 Timing hygiene: the local pool never runs more cases at once than this process has cores
-(:func:`harness.run.executor.usable_cores`), and every worker has one BLAS/numba thread.  Ctrl-C, or
+(:func:`mbh._harness.run.executor.usable_cores`), and every worker has one BLAS/numba thread.  Ctrl-C, or
 a stop signal (SIGTERM from a scheduler, a CI timeout or ``systemd``; SIGHUP from a closed
 terminal: :data:`STOP_SIGNALS`), kills the running workers, marks the run ``interrupted`` (every
 finished case stays stored) and raises :class:`CampaignInterrupted`; ``resume`` completes it.
@@ -34,15 +34,15 @@ import signal
 import sys
 import threading
 
-from harness.model import scenario
-from harness.common.environment import code_fingerprint
-from harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
-from harness.run.row import CaseWork
-from harness.run.executor import WorkerProcesses, execute, usable_cores
-from harness.references.build import ReferenceBuildError, reference_trajectory
-from harness.store.runs import CaseCache, RunLocked, RunStore
-from harness.run.sweep import bisections, stability_sweep
-from harness.common.errors import MbhError
+from mbh._harness.model import scenario
+from mbh._harness.common.environment import code_fingerprint
+from mbh._harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
+from mbh._harness.run.row import CaseWork
+from mbh._harness.run.executor import WorkerProcesses, execute, usable_cores
+from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
+from mbh._harness.store.runs import CaseCache, RunLocked, RunStore
+from mbh._harness.run.sweep import bisections, stability_sweep
+from mbh._harness.common.errors import MbhError
 
 
 #: How long to wait for a Dask scheduler to answer, s.
@@ -186,7 +186,7 @@ class _Recorder:
 def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
     """Content hashes of the scenarios and versions of the adapters (for an adapter that cannot
     be loaded, the reason: its cases become rows that say so)."""
-    from adapters import version_or_problem
+    from mbh._adapters import version_or_problem
 
     keys = {name: scenario.load(name).content_hash for name in names}
     for name in adapters:
@@ -197,7 +197,7 @@ def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
 
 def _cache_settings(campaign) -> str:
     """What a cached row depends on besides its case and engine: the harness's and adapters'
-    code (:func:`~harness.common.environment.code_fingerprint`), the verdict's bounds and the accuracy
+    code (:func:`~mbh._harness.common.environment.code_fingerprint`), the verdict's bounds and the accuracy
     the campaign judges ``accurate`` by; a row computed under other settings is not reused."""
     return json.dumps({"code": code_fingerprint(), "bounds": dataclasses.asdict(campaign.bounds),
                        "accuracy": campaign.accuracy}, sort_keys=True)
@@ -205,7 +205,7 @@ def _cache_settings(campaign) -> str:
 
 def _sweep(campaign, store: RunStore, work, workers, backend: dict, quiet: bool) -> None:
     """Run the campaign's stability sweep (searches with a stored row are skipped)."""
-    from harness.run.spec import DEFAULT_TIMEOUT_S, CaseSpec
+    from mbh._harness.run.spec import DEFAULT_TIMEOUT_S, CaseSpec
 
     # One repetition (only the status and the error matter); the campaign's longest case limit.
     timeout = max((spec.timeout_s for spec in campaign.cases), default=DEFAULT_TIMEOUT_S)
@@ -230,7 +230,7 @@ def _sweep(campaign, store: RunStore, work, workers, backend: dict, quiet: bool)
 def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None = None,
                  resume: str | None = None, reuse: bool = False, root=None, quiet: bool = False,
                  work=None, warm_workers: bool = True) -> RunStore:
-    """Run ``campaign`` (a :class:`harness.run.spec.Campaign`) into the result store.
+    """Run ``campaign`` (a :class:`mbh._harness.run.spec.Campaign`) into the result store.
 
     Parameters
     ----------
@@ -243,15 +243,15 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     reuse : bool
         Copy identical cases from the cache instead of running them.
     root : path, optional
-        Results root (default :func:`harness.store.runs.results_root`).
+        Results root (default :func:`mbh._harness.store.runs.results_root`).
     quiet : bool
         No progress bar and no notes on stderr.
     work : callable, optional
         ``work(spec) -> (row, trajectory)`` run in the workers; default
-        :class:`~harness.run.row.CaseWork` with the campaign's bounds and accuracy.
+        :class:`~mbh._harness.run.row.CaseWork` with the campaign's bounds and accuracy.
     warm_workers : bool
         Locally, fork each case's process from the warm template (default) rather than start a
-        fresh interpreter per case (:class:`harness.run.executor.WorkerProcesses`).
+        fresh interpreter per case (:class:`mbh._harness.run.executor.WorkerProcesses`).
 
     Returns
     -------
@@ -290,7 +290,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     if campaign.sweep is not None:
         names |= set(campaign.sweep.scenarios)
     # The template's start overlaps the references' preparation and, when it starts now, the
-    # calibration in this process (harness.run.calibration).
+    # calibration in this process (mbh._harness.run.calibration).
     template_starting = (scheduler is None and warm_workers
                          and WorkerProcesses.start_template(names))
     prepare_references(names, say)

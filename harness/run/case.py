@@ -6,14 +6,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from adapters.base import Adapter, UnsupportedCase, blame
-from harness.common.capture import captured_output, engine_note
-from harness.neutral.conditioning import label_failure
-from harness.measure.metrics import case_metrics
-from harness.model.mechanism import Mechanism
-from harness.model.timegrid import sample_times
-from harness.model.trajectory import Trajectory
-from harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
+from mbh._adapters.base import Adapter, UnsupportedCase, blame
+from mbh._harness.common.capture import captured_output, engine_note
+from mbh._harness.neutral.conditioning import label_failure
+from mbh._harness.measure.metrics import case_metrics
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.timegrid import sample_times
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -22,17 +22,17 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class CaseResult:
     """One case's result: the judged trajectory, its metrics
-    (:func:`harness.measure.metrics.case_metrics`) and, for a campaign case, its flat row.
+    (:func:`mbh._harness.measure.metrics.case_metrics`) and, for a campaign case, its flat row.
 
     Attributes
     ----------
     trajectory : Trajectory
         The judged trajectory.
     metrics : dict
-        :func:`~harness.measure.metrics.case_metrics` of the run; empty when the case failed
+        :func:`~mbh._harness.measure.metrics.case_metrics` of the run; empty when the case failed
         before it was measured.
     row : dict or None
-        The flat campaign row (:func:`harness.run.row.run_spec`); None from :func:`run_case`.
+        The flat campaign row (:func:`mbh._harness.run.row.run_spec`); None from :func:`run_case`.
     """
 
     trajectory: Trajectory
@@ -51,14 +51,14 @@ class CaseResult:
 
     def to_frame(self) -> pd.DataFrame:
         """The case's row as a one-row DataFrame, with the columns and types of a stored run's
-        (:func:`harness.store.runs.load_run`) less those the store adds (``run_id``,
+        (:func:`mbh._harness.store.runs.load_run`) less those the store adds (``run_id``,
         ``trajectory_file``, ``reused_from``); raises ValueError for a result without a row."""
         if self.row is None:
-            raise ValueError("this result has no row: run it with harness.run.row.run_one or "
+            raise ValueError("this result has no row: run it with mbh._harness.run.row.run_one or "
                              "in a campaign")
         # Imported here: a case's process (forked from the warm template, or a fresh interpreter)
         # never needs pandas and pyarrow, whose import added 0.37 s to the template's start.
-        from harness.store.runs import case_frame
+        from mbh._harness.store.runs import case_frame
 
         return case_frame(self.row)
 
@@ -69,7 +69,7 @@ def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
 
     A mechanism the engine cannot build gives an ``unsupported`` trajectory; one whose build
     raises anything else, a ``failed`` one whose reason names a third-party adapter and its
-    package (:func:`adapters.base.blame`).  Raises ValueError for a step or end time that does not
+    package (:func:`mbh._adapters.base.blame`).  Raises ValueError for a step or end time that does not
     fit the sample grid or the adapter (user input).
     """
     times = sample_times(dt, t_end, mech.sample_step)
@@ -94,7 +94,7 @@ class _BuildBroke(Exception):
 
 def _built(adapter: Adapter, mech: Mechanism):
     """``adapter.build(mech)``; any exception but UnsupportedCase becomes :class:`_BuildBroke`
-    (a third-party adapter and its package named, :func:`adapters.base.blame`)."""
+    (a third-party adapter and its package named, :func:`mbh._adapters.base.blame`)."""
     try:
         return adapter.build(mech)
     except UnsupportedCase:
@@ -105,8 +105,8 @@ def _built(adapter: Adapter, mech: Mechanism):
 
 def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: float,
              reference: Trajectory | None = None, bounds: Bounds = DEFAULT_BOUNDS) -> CaseResult:
-    """Simulate one case, judge it (:func:`harness.measure.verdict.judge`), say where it failed
-    (:func:`harness.neutral.conditioning.label_failure`: at a singular configuration, on an
+    """Simulate one case, judge it (:func:`mbh._harness.measure.verdict.judge`), say where it failed
+    (:func:`mbh._harness.neutral.conditioning.label_failure`: at a singular configuration, on an
     overconstrained loop) and measure it.
 
     Parameters

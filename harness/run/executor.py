@@ -5,9 +5,9 @@ thread (:data:`WORKER_ENV`, set before anything imports numpy), in a process gro
 
 * warm (local default): forked by :mod:`multiprocessing`'s fork server from a template process
   that has imported numpy, scipy, the harness and the engines and loaded the compiled in-house
-  kernels once (:mod:`harness.run.warm`); a case's process starts in ~0.05 s instead of the
+  kernels once (:mod:`mbh._harness.run.warm`); a case's process starts in ~0.05 s instead of the
   1–3 s of a fresh interpreter (``benchmarks/worker_start.py`` measures both side by side);
-* cold: a fresh interpreter per case (``python -m harness.run.executor``), as on Dask, where a
+* cold: a fresh interpreter per case (``python -m mbh._harness.run.executor``), as on Dask, where a
   worker process may not fork children of its own.
 
 Either way a worker dies with its parent: the kernel kills it when the process that started it
@@ -64,7 +64,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
-from harness.common.progress import CaseProgress, progress_wanted
+from mbh._harness.common.progress import CaseProgress, progress_wanted
 
 #: Environment of every worker process: one thread per BLAS/OpenMP/numba pool, so timed cases
 #: running side by side do not compete for cores.
@@ -135,13 +135,13 @@ def die_with_parent(parent: int | None) -> None:
 # --- worker processes -----------------------------------------------------------------------
 
 class _ColdWorker:
-    """A case in a fresh interpreter (``python -m harness.run.executor RESULT PARENT``, the work
+    """A case in a fresh interpreter (``python -m mbh._harness.run.executor RESULT PARENT``, the work
     sent on stdin, :data:`WORKER_ENV`, its own process group, output captured)."""
 
     def __init__(self, work: Callable, spec, result_path: Path):
         self._payload = pickle.dumps((list(sys.path), pickle.dumps((work, spec))))
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "harness.run.executor", str(result_path), str(os.getpid())],
+            [sys.executable, "-m", "mbh._harness.run.executor", str(result_path), str(os.getpid())],
             stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
             env=os.environ | WORKER_ENV, process_group=0)
         self._output = b""
@@ -171,7 +171,7 @@ _POLL_LOCK = threading.Lock()
 
 
 class _ForkedWorker:
-    """A case in a process forked from the warm template (:mod:`harness.run.warm`), output to a
+    """A case in a process forked from the warm template (:mod:`mbh._harness.run.warm`), output to a
     file beside the result, in a process group of its own, with this process's working folder,
     environment (plus :data:`WORKER_ENV`) and ``sys.path`` as they are now, not as they were when
     the template started.
@@ -215,7 +215,7 @@ class _ForkedWorker:
 
 class WorkerProcesses:
     """Starts the worker of every case of one execution, warm (forked from a template process
-    that has already imported and loaded everything: :mod:`harness.run.warm`) or cold (a fresh
+    that has already imported and loaded everything: :mod:`mbh._harness.run.warm`) or cold (a fresh
     interpreter), and kills them all on an interrupt.
 
     Parameters
@@ -237,7 +237,7 @@ class WorkerProcesses:
     def _fork_context(cls):
         if cls._context is None:
             cls._context = multiprocessing.get_context("forkserver")
-            cls._context.set_forkserver_preload(["harness.run.warm"])
+            cls._context.set_forkserver_preload(["mbh._harness.run.warm"])
         return cls._context
 
     @classmethod
@@ -333,7 +333,7 @@ def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
         Wall-clock limit of the whole child, its start included, s.
     failure_row : callable
         ``failure_row(spec, status, reason) -> row`` for a case that gave no result
-        (:func:`harness.run.row.error_row`).
+        (:func:`mbh._harness.run.row.error_row`).
     workers : WorkerProcesses, optional
         Registry the child is started through (an interrupt kills it there); default: a cold
         worker of its own (a Dask task, one-off callers).
@@ -415,7 +415,7 @@ def _forked_main(result_path: str, output_path: str, here: tuple, work: Callable
 
 
 def _default_failure_row() -> Callable:
-    from harness.run.row import error_row
+    from mbh._harness.run.row import error_row
 
     return error_row
 
@@ -443,7 +443,7 @@ def execute(specs: Iterable, work: Callable, *, workers: int | None = None,
     progress : bool
         Draw the progress bar (only when stderr is a terminal).
     failure_row : callable, optional
-        ``failure_row(spec, status, reason) -> row``; default :func:`harness.run.row.error_row`.
+        ``failure_row(spec, status, reason) -> row``; default :func:`mbh._harness.run.row.error_row`.
     warm : bool
         Local backend: fork each case's process from the warm template (default) rather than
         start a fresh interpreter (:class:`WorkerProcesses`).

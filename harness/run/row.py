@@ -1,11 +1,11 @@
 """One campaign case → one flat result row (scalars only) and its trajectory.
 
-:func:`run_spec` runs a :class:`~harness.run.spec.CaseSpec` the one way every caller does
-(:func:`harness.run.case.run_case`: build → simulate → the stick's verdict → metrics), against the
+:func:`run_spec` runs a :class:`~mbh._harness.run.spec.CaseSpec` the one way every caller does
+(:func:`mbh._harness.run.case.run_case`: build → simulate → the stick's verdict → metrics), against the
 scenario's verified reference when there is one, repeats the timed run, and flattens everything a
 report needs into one tidy row: the stick's metrics, the status with its reason and failure time,
 wall times (the median over the repetitions, per simulated second and per step), the engine's cost
-counters, the model size the engine carried (:meth:`adapters.base.Adapter.model_size`) and the
+counters, the model size the engine carried (:meth:`mbh._adapters.base.Adapter.model_size`) and the
 versions.  Nested values (counters, notes, the list of wall times, package versions) are JSON
 strings, so every column holds str, float, int, bool or None.
 
@@ -13,7 +13,7 @@ Columns: ``case_id, scenario, scenario_hash, adapter, adapter_version, method, d
 repetitions, status, reason, failure_time, accurate, main_output, main_output_error, wall_time_s,
 wall_time_per_sim_s, wall_time_per_step_s, wall_times_s, steps, rhs_evals, counters, notes,
 n_coordinates, n_constraint_equations, n_redundant_equations, model_notes, reference, packages``,
-every scalar of :func:`harness.measure.metrics.case_metrics` (``samples``, ``final_time``,
+every scalar of :func:`mbh._harness.measure.metrics.case_metrics` (``samples``, ``final_time``,
 ``max_constraint_violation``, ``max_velocity_violation``, ``max_energy_error_J``,
 ``max_energy_error_rel``, ``max_joint_gap_m`` …), and per scenario output ``error_<output>``
 (max |y − y_ref|, rad, rad/s or m) and ``final_<output>`` (its value at the last sample).
@@ -28,17 +28,17 @@ from dataclasses import dataclass
 import numpy as np
 import scipy
 
-from adapters import AdapterLoadError, get_adapter
-from adapters.base import Adapter, UnsupportedCase, blame, describe
-from harness.model import scenario
-from harness.run.spec import CaseSpec, main_output
-from harness.run.case import CaseResult, run_case, simulate_case
-from harness.common.jsonout import dumps
-from harness.measure.metrics import constraint_violations
-from harness.model.mechanism import Mechanism
-from harness.references.build import ReferenceBuildError, reference_trajectory
-from harness.model.trajectory import Trajectory
-from harness.measure.verdict import Bounds
+from mbh._adapters import AdapterLoadError, get_adapter
+from mbh._adapters.base import Adapter, UnsupportedCase, blame, describe
+from mbh._harness.model import scenario
+from mbh._harness.run.spec import CaseSpec, main_output
+from mbh._harness.run.case import CaseResult, run_case, simulate_case
+from mbh._harness.common.jsonout import dumps
+from mbh._harness.measure.metrics import constraint_violations
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.measure.verdict import Bounds
 
 def packages(adapter: Adapter) -> str:
     """JSON of the versions that produced a row: numpy, scipy, the engine and, for a third-party
@@ -135,7 +135,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
     ----------
     spec : CaseSpec
     mech : Mechanism, optional
-        The scene, when it was built in Python (:mod:`harness.model.builder`); loaded from
+        The scene, when it was built in Python (:mod:`mbh._harness.model.builder`); loaded from
         ``spec.scenario`` otherwise.
     bounds : Bounds
         The verdict's bounds.

@@ -1,9 +1,9 @@
 """One case from Python: a scene (by name, path or built mechanism), an adapter, a method and a
-step → a :class:`~harness.run.case.CaseResult` with its status, reason, metrics, trajectory and
+step → a :class:`~mbh._harness.run.case.CaseResult` with its status, reason, metrics, trajectory and
 the row a campaign would store (``to_frame()``).
 
 The inputs are checked before anything runs, with the rules a campaign file's cases obey
-(:mod:`harness.run.spec`); every problem is named by its argument in one :class:`CaseInputError`.
+(:mod:`mbh._harness.run.spec`); every problem is named by its argument in one :class:`CaseInputError`.
 What the engine does with a valid case is a result (the row's status), never an exception.
 """
 
@@ -12,16 +12,16 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from adapters import adapter_names, get_adapter
-from harness.common.errors import MbhError
-from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
-from harness.model import scenario
-from harness.model.mechanism import Mechanism
-from adapters.base import steps_in
-from harness.model.timegrid import steps_per_sample
-from harness.run.case import CaseResult
-from harness.run.row import run_spec
-from harness.run.spec import CaseSpec
+from mbh._adapters import adapter_names, get_adapter
+from mbh._harness.common.errors import MbhError
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import Mechanism
+from mbh._adapters.base import steps_in
+from mbh._harness.model.timegrid import steps_per_sample
+from mbh._harness.run.case import CaseResult
+from mbh._harness.run.row import run_spec
+from mbh._harness.run.spec import CaseSpec
 
 
 class CaseInputError(MbhError, ValueError):
@@ -53,7 +53,7 @@ def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
     ----------
     scene : str, Path or Mechanism
         A shipped scenario name, a scenario file, or a mechanism built in Python
-        (:class:`harness.model.builder.MechanismBuilder`).
+        (:class:`mbh._harness.model.builder.MechanismBuilder`).
     adapter : str
         Adapter name (``mbh adapters``).
     method : str

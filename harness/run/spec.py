@@ -3,7 +3,7 @@
 A campaign is scenarios × adapters × methods × step sizes, written as one or more ``[[group]]``
 blocks, plus the run's settings.  The validator walks the whole file, collects every problem with
 its field path and raises one :class:`CampaignError` listing them all (the style of
-:mod:`harness.model.scenario`), before anything runs.  Expansion into :class:`CaseSpec` objects is
+:mod:`mbh._harness.model.scenario`), before anything runs.  Expansion into :class:`CaseSpec` objects is
 deterministic; a case produced twice is kept once, with the earlier group's settings.
 
 The file format (keys, defaults, the rules checked, expansion order, an example) is documented in
@@ -17,15 +17,15 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from adapters import AdapterLoadError, adapter_names, get_adapter
-from adapters.base import Adapter, steps_in
-from harness.model import scenario
-from harness.model.mechanism import Mechanism
-from harness.model.timegrid import steps_per_sample
-from harness.model.scenario import Problem, _Collector, _join, finite_number, read_toml
-from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
-from harness.common.errors import MbhError
-from harness.common.locations import shipped
+from mbh._adapters import AdapterLoadError, adapter_names, get_adapter
+from mbh._adapters.base import Adapter, steps_in
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.timegrid import steps_per_sample
+from mbh._harness.model.scenario import Problem, _Collector, _join, finite_number, read_toml
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.locations import shipped
 
 CAMPAIGN_DIR = shipped("campaigns")
 
@@ -145,7 +145,7 @@ class Campaign:
 
 
 class CampaignError(MbhError, ValueError):
-    """Raised once per file with every :class:`~harness.model.scenario.Problem` found."""
+    """Raised once per file with every :class:`~mbh._harness.model.scenario.Problem` found."""
 
     def __init__(self, problems: list[Problem]):
         self.problems = problems

@@ -3,7 +3,7 @@
 For each (scenario, adapter, method) of a campaign's ``[sweep]`` the sweep bisects on the step
 size dt over the admissible steps between the campaign's ``dt_min`` and ``dt_max``: the steps
 that divide the scene's evaluation grid step, dt = 0.01 s / k for an integer k (or the scene's
-finer ``sample_step`` / k, :mod:`harness.model.timegrid`).
+finer ``sample_step`` / k, :mod:`mbh._harness.model.timegrid`).
 A step passes when its run ends ``ok`` and, where the scenario has a verified reference, its
 main-output error is within the campaign's accuracy threshold (the row's ``accurate``); without a
 reference only the status counts, and the row's ``criterion`` says so.
@@ -22,8 +22,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from harness.common.jsonout import dumps
-from harness.model.timegrid import EVALUATION_STEP
+from mbh._harness.common.jsonout import dumps
+from mbh._harness.model.timegrid import EVALUATION_STEP
 
 
 def passes(row: dict) -> bool:

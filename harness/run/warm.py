@@ -1,9 +1,9 @@
 """The template every warm worker is forked from: imported once by the fork server
 (:mod:`multiprocessing.forkserver`, the ``preload`` of
-:class:`harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy,
+:class:`mbh._harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy,
 scipy, the harness and every registered engine, runs a few tiny cases so the compiled in-house
 kernels are loaded from numba's cache, and reads the campaign's scenarios and their stored
-references (:mod:`harness.common.kept_files`), assembles their starts and computes what the
+references (:mod:`mbh._harness.common.kept_files`), assembles their starts and computes what the
 measuring stick derives from each reference alone.  Each case's process is then forked from this
 state: a fresh process per case (a crash stays a row) that starts in milliseconds instead of
 seconds (docs/speed.md, "Worker start").
@@ -18,13 +18,13 @@ import json
 import multiprocessing.spawn
 import os
 
-from harness.run.executor import WORKER_ENV
+from mbh._harness.run.executor import WORKER_ENV
 
 # Before numpy and the engines load their thread pools: one thread per case.
 os.environ.update(WORKER_ENV)
 
 #: The parts of multiprocessing's child preparation that re-run the starting process's main
-#: module in the child: a user's script, or ``harness.cli``.  A case's process never needs it (its
+#: module in the child: a user's script, or ``mbh._harness.cli``.  A case's process never needs it (its
 #: work and spec are importable by name, as a cold worker needs them), and a script that starts a
 #: campaign at its top level, without ``if __name__ == "__main__":``, would start the campaign
 #: again in every case's process, which multiprocessing refuses (every case ``crashed``).
@@ -54,10 +54,10 @@ WARM_UP = (
 def _warm_up() -> list[str]:
     """Import the engines and run :data:`WARM_UP`; returns what could not be warmed (a warm-up
     failure only costs the cases the load time it would have saved)."""
-    from adapters import adapter_names, get_adapter
-    from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
-    from harness.run.row import run_spec
-    from harness.run.spec import CaseSpec
+    from mbh._adapters import adapter_names, get_adapter
+    from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
+    from mbh._harness.run.row import run_spec
+    from mbh._harness.run.spec import CaseSpec
 
     missed = []
     for name in adapter_names():
@@ -74,18 +74,18 @@ def _warm_up() -> list[str]:
 
 
 def _keep_scenarios() -> list[str]:
-    """Read the scenarios :data:`~harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
-    references, inside :func:`harness.common.kept_files.keeping`, assemble each scene's start
-    (:func:`harness.neutral.start.initial_state`, cached per scene) and compute what the measuring
-    stick derives from each reference alone (:func:`harness.measure.verdict.prepare_reference`),
+    """Read the scenarios :data:`~mbh._harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
+    references, inside :func:`mbh._harness.common.kept_files.keeping`, assemble each scene's start
+    (:func:`mbh._harness.neutral.start.initial_state`, cached per scene) and compute what the measuring
+    stick derives from each reference alone (:func:`mbh._harness.measure.verdict.prepare_reference`),
     so the cases forked from here find them done (a reference that is not stored yet is not
     built: its cases read or build it as a cold worker does).  Returns what could not be read."""
-    from harness.common.kept_files import keeping
-    from harness.measure.verdict import prepare_reference
-    from harness.model import scenario
-    from harness.neutral.start import initial_state
-    from harness.run.executor import WARM_SCENARIOS_ENV
-    from harness.store.reference_files import read_reference
+    from mbh._harness.common.kept_files import keeping
+    from mbh._harness.measure.verdict import prepare_reference
+    from mbh._harness.model import scenario
+    from mbh._harness.neutral.start import initial_state
+    from mbh._harness.run.executor import WARM_SCENARIOS_ENV
+    from mbh._harness.store.reference_files import read_reference
 
     missed = []
     with keeping():
@@ -101,6 +101,6 @@ def _keep_scenarios() -> list[str]:
     return missed
 
 
-#: What the warm-up could not do, for diagnostics (``python -c "import harness.run.warm"``).
+#: What the warm-up could not do, for diagnostics (``python -c "import mbh._harness.run.warm"``).
 #: The scenarios are read after the warm-up cases, so nothing those did can change what is kept.
 MISSED = _warm_up() + _keep_scenarios()

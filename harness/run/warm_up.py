@@ -5,7 +5,7 @@ The in-house kernels and loops are compiled by numba at their first use and cach
 and code (docs/speed.md, "Caches"): a fresh machine, or a new version of the kernels, pays a few
 minutes once.  A test suite's workers or a campaign's cases would each meet that wait at a
 different place (one process compiles, the others wait on its lock,
-:mod:`adapters.inhouse.on_demand`); the warm-up pays it up front, with the cores in parallel,
+:mod:`mbh._adapters.inhouse.on_demand`); the warm-up pays it up front, with the cores in parallel,
 and says so.  ``make test`` and ``make report`` run it first: the measured choice between this and
 compiling at install time is in docs/speed.md, "What a first run compiles".
 
@@ -25,7 +25,7 @@ import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
 from dataclasses import dataclass
 
-from harness.common import waits
+from mbh._harness.common import waits
 
 #: (scene, method, dt s, t_end s, what it compiles) of each phase, longest first.
 PHASES = (
@@ -91,9 +91,9 @@ def _run(case: WarmCase) -> Warmed:
     try:
         import numpy as np
 
-        from adapters import get_adapter
-        from harness.model import scenario
-        from harness.references.routes import full_route, reduced_route
+        from mbh._adapters import get_adapter
+        from mbh._harness.model import scenario
+        from mbh._harness.references.routes import full_route, reduced_route
 
         mech = scenario.load(case.scene)
         if case.method == NEUTRAL_ROUTES:

@@ -3,5 +3,5 @@
 (``compare``) and the files of verified references (``reference_files``).  A report reads
 these only.
 
-May import: :mod:`harness.common`, :mod:`harness.model`.
+May import: :mod:`mbh._harness.common`, :mod:`mbh._harness.model`.
 """

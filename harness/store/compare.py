@@ -30,7 +30,7 @@ def _calibration(value, name: str) -> float:
 
 
 def comparable_calibrations(a, b) -> tuple[float | None, float | None]:
-    """The machine-speed figures (:attr:`~harness.store.runs.RunStore.calibration_s`) of runs ``a``
+    """The machine-speed figures (:attr:`~mbh._harness.store.runs.RunStore.calibration_s`) of runs ``a``
     and ``b`` when the same workload measured both, else (None, None): their times are then not
     compared (a changed numpy or scipy, or a run calibrated before the workload)."""
     if a.calibration_workload is None or a.calibration_workload != b.calibration_workload:
@@ -46,7 +46,7 @@ def compare_runs(a: pd.DataFrame, b: pd.DataFrame, calibration_a: float | None,
     Parameters
     ----------
     a, b : DataFrame
-        Case rows (:meth:`harness.store.runs.RunStore.cases`): ``case_id``, ``scenario``, ``adapter``, ``method``,
+        Case rows (:meth:`mbh._harness.store.runs.RunStore.cases`): ``case_id``, ``scenario``, ``adapter``, ``method``,
         ``dt``, ``status``, ``main_output_error`` (rad or m), ``wall_time_s`` (s).
     calibration_a, calibration_b : float or None
         Each run's calibration time, s; None leaves the time ratio NaN.

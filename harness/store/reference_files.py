@@ -9,7 +9,7 @@ routes, their agreement and cost).  A refused build is recorded beside them
 
 Shipped scenes come with their references (``scenarios/references``, inside the installed
 package); a reference built on this machine goes to the user cache (:func:`cache_dir`), never into
-the package.  The references are built by :mod:`harness.references.build`; reports read
+the package.  The references are built by :mod:`mbh._harness.references.build`; reports read
 them through :func:`stored_reference` and never build one.
 
 Files are written atomically (a unique temporary file moved into place with ``os.replace``),
@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.common.kept_files import read_kept
-from harness.common.locations import shipped, user_cache
-from harness.model.mechanism import Mechanism
-from harness.model.timegrid import GRID_STEP
-from harness.model.trajectory import Trajectory
+from mbh._harness.common.kept_files import read_kept
+from mbh._harness.common.locations import shipped, user_cache
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.timegrid import GRID_STEP
+from mbh._harness.model.trajectory import Trajectory
 
 __all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "ARRAYS", "CACHE_ENV", "cache_dir",
            "search_dirs", "reference_grid",
@@ -51,7 +51,7 @@ CACHE_ENV = "MBH_CACHE_DIR"
 
 def cache_dir() -> Path:
     """Where references built here are written: ``$MBH_CACHE_DIR``, else ``references`` in the
-    user cache (:func:`harness.common.locations.user_cache`)."""
+    user cache (:func:`mbh._harness.common.locations.user_cache`)."""
     configured = os.environ.get(CACHE_ENV)
     return Path(configured) if configured else user_cache() / "references"
 
@@ -119,7 +119,7 @@ def write_reference(mech: Mechanism, trajectory: Trajectory, info: dict) -> None
 def read_unchecked(data_path: Path, info_path: Path) -> tuple[Trajectory, dict] | None:
     """The stored (trajectory, info) as they are on disk, or None when a file is missing or
     unreadable.  The trajectory's arrays are read-only: the warm template's read is kept for every
-    case forked from it (:mod:`harness.common.kept_files`), and none may change what the next reads.
+    case forked from it (:mod:`mbh._harness.common.kept_files`), and none may change what the next reads.
     """
     return read_kept("reference", (data_path, info_path),
                      lambda: _read_files(data_path, info_path))

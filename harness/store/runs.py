@@ -22,7 +22,7 @@ killed writer are never read.  Read a run with :func:`load_run` (any time) or
 ``pd.read_parquet(<run>/cases.parquet)`` (once finished or interrupted), not the ``cases/``
 folder as a dataset: a column that only some parts carry, or that is None in the first part,
 does not fit the first part's schema there.  Column types are declared in
-:mod:`harness.store.schema`; older schema versions are migrated on read.  :class:`CaseCache`
+:mod:`mbh._harness.store.schema`; older schema versions are migrated on read.  :class:`CaseCache`
 keeps rows and trajectories of identical cases across runs under ``<root>/cache/`` for
 ``mbh run --reuse``.
 
@@ -57,16 +57,16 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from harness.common.locations import checkout, user_data
-from harness.common import jsonout
-from harness.common.errors import MbhError
-from harness.common.machine_speed import workload_name
+from mbh._harness.common.locations import checkout, user_data
+from mbh._harness.common import jsonout
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.machine_speed import workload_name
 
-from harness.model import scenario
-from harness.common.environment import git_state, machine, package_versions
-from harness.store.schema import (CASE_COLUMNS, SCHEMA_VERSION, SWEEP_COLUMNS, VERSION_KEY,
+from mbh._harness.model import scenario
+from mbh._harness.common.environment import git_state, machine, package_versions
+from mbh._harness.store.schema import (CASE_COLUMNS, SCHEMA_VERSION, SWEEP_COLUMNS, VERSION_KEY,
                                   SchemaError, column_type, migrate_manifest, migrate_table)
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 
 __all__ = ["SCHEMA_VERSION", "results_root", "RunStore", "list_runs", "latest_run", "load_run",
            "case_frame", "CaseCache", "RUN_STATUSES", "UNREADABLE", "StoreError", "StoreProblem",
@@ -297,7 +297,7 @@ class _PartTable:
     folder : Path
         Where the parts live.
     columns : dict
-        Declared column types (:mod:`harness.store.schema`).
+        Declared column types (:mod:`mbh._harness.store.schema`).
     key : str
         Column identifying a row; reading keeps the first row of each key (when present).
     fallback_version : int
@@ -605,12 +605,12 @@ class RunStore:
 
     @classmethod
     def create(cls, campaign, root: Path | None = None) -> "RunStore":
-        """A new run folder for ``campaign`` (a :class:`harness.run.spec.Campaign`; reads its
+        """A new run folder for ``campaign`` (a :class:`mbh._harness.run.spec.Campaign`; reads its
         name, path, text, cases and sweep).
 
         Raises
         ------
-        harness.model.scenario.ScenarioError
+        mbh._harness.model.scenario.ScenarioError
             When a scenario of the campaign does not load (the manifest records the content
             hash of each scenario its cases and sweep use).
         """
@@ -733,7 +733,7 @@ class RunStore:
     def set_calibration(self, seconds: float, workload: str | None = None) -> None:
         """Record the run's machine-speed figure, s (positive and finite), and the workload that
         measured it (default: this process's,
-        :func:`~harness.common.machine_speed.workload_name`)."""
+        :func:`~mbh._harness.common.machine_speed.workload_name`)."""
         seconds = float(seconds)
         if not np.isfinite(seconds) or seconds <= 0:
             raise ValueError(f"calibration time must be positive and finite, got {seconds!r} s")
@@ -743,7 +743,7 @@ class RunStore:
 
     @property
     def calibration_s(self) -> float | None:
-        """The run's machine-speed figure, s (:mod:`harness.common.machine_speed`): None until
+        """The run's machine-speed figure, s (:mod:`mbh._harness.common.machine_speed`): None until
         :meth:`set_calibration`, and for a run stored before the figure was that workload's
         (its ``calibration_s`` timed an in-house case, which followed the in-house code's speed
         rather than the machine's)."""
@@ -753,7 +753,7 @@ class RunStore:
 
     @property
     def calibration_workload(self) -> str | None:
-        """What measured :attr:`calibration_s` (:func:`~harness.common.machine_speed.workload_name`;
+        """What measured :attr:`calibration_s` (:func:`~mbh._harness.common.machine_speed.workload_name`;
         two figures compare only when these are equal), or None."""
         return self.manifest.get("calibration_workload")
 

@@ -1,7 +1,7 @@
 """The result store's schema: column types, the version, and the migrations from older versions.
 
 A run folder holds ``manifest.json`` and the case rows as Parquet part files (see
-:mod:`harness.store.runs`).  Each part file records the schema version it was written with in its
+:mod:`mbh._harness.store.runs`).  Each part file records the schema version it was written with in its
 Parquet key-value metadata (:data:`VERSION_KEY`); a part without it takes the manifest's version.
 Reading applies :func:`migrate_table` and :func:`migrate_manifest`, so every reader sees the
 current layout, whatever version wrote the files.
@@ -24,7 +24,7 @@ from __future__ import annotations
 import pyarrow as pa
 import pyarrow.compute as pc
 
-from harness.common.errors import MbhError
+from mbh._harness.common.errors import MbhError
 
 #: The layout this code writes.
 SCHEMA_VERSION = 2
@@ -37,7 +37,7 @@ _FLOAT = pa.float64()
 _INT = pa.int64()
 _BOOL = pa.bool_()
 
-#: Declared types of the case-row columns (the row of ``harness.run.row``, plus ``run_id`` and
+#: Declared types of the case-row columns (the row of ``mbh._harness.run.row``, plus ``run_id`` and
 #: ``trajectory_file`` added by the store).  Declared columns always get this type, so parts
 #: written with a None in one column and a float in the next concatenate; columns not declared
 #: here (``error_<output>``, further metrics) are typed from their Python value.

@@ -1,12 +1,12 @@
-"""Harness cases for tolerance assertions (:mod:`harness.testing.tolerances`) and the pytest
-plugin (:mod:`harness.testing.plugin`), run in the caller's process or, isolated, in a worker
+"""Harness cases for tolerance assertions (:mod:`mbh._harness.testing.tolerances`) and the pytest
+plugin (:mod:`mbh._harness.testing.plugin`), run in the caller's process or, isolated, in a worker
 process of their own.
 
-* :class:`CaseRunner` runs cases (:func:`harness.run.row.run_spec`: the same build → simulate →
+* :class:`CaseRunner` runs cases (:func:`mbh._harness.run.row.run_spec`: the same build → simulate →
   verdict → metrics as a campaign) and keeps every finished case for the session, so a
   parametrized suite that asks for a case twice runs it once; it also loads references and runs
-  the machine-speed workload (:mod:`harness.common.machine_speed`) once, for calibrated time
-  ratios.  An isolated case runs as a campaign's does (:func:`harness.run.executor.run_isolated`):
+  the machine-speed workload (:mod:`mbh._harness.common.machine_speed`) once, for calibrated time
+  ratios.  An isolated case runs as a campaign's does (:func:`mbh._harness.run.executor.run_isolated`):
   an engine that crashes or hangs gives a ``crashed`` or ``timeout`` case, the signal named in its
   reason, and the test session goes on;
 * :func:`campaign_cases`, a campaign file turned into (readable id, case) pairs for parametrized
@@ -21,17 +21,17 @@ from typing import Callable
 
 import numpy as np
 
-from harness.model import scenario
-from harness.run.case import CaseResult
-from harness.run.spec import CaseSpec, load_campaign, main_output
-from harness.model.mechanism import Mechanism
-from harness.model.outputs import output_series
-from harness.references.build import ReferenceBuildError, reference_trajectory
-from harness.model.timegrid import reference_indices
-from harness.model.trajectory import Trajectory
-from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
-from harness.common.errors import MbhError
-from harness.common.machine_speed import machine_speed_s
+from mbh._harness.model import scenario
+from mbh._harness.run.case import CaseResult
+from mbh._harness.run.spec import CaseSpec, load_campaign, main_output
+from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
+from mbh._harness.model.timegrid import reference_indices
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
+from mbh._harness.common.errors import MbhError
+from mbh._harness.common.machine_speed import machine_speed_s
 
 #: Key of a tolerance table (and of a :class:`Selection`) that matches every name.
 ANY = "*"
@@ -44,7 +44,7 @@ class ToleranceError(MbhError, ValueError):
 
 def case_spec(scenario_name: str, adapter: str, method: str, dt: float,
               t_end: float | None = None, repetitions: int = 1) -> CaseSpec:
-    """A :class:`~harness.run.spec.CaseSpec` with the scenario's own duration unless ``t_end``
+    """A :class:`~mbh._harness.run.spec.CaseSpec` with the scenario's own duration unless ``t_end``
     (s) is given.  ``repetitions`` > 1 times the case that often (the median wall time)."""
     if t_end is None:
         t_end = scenario.load(scenario_name).duration
@@ -79,7 +79,7 @@ def campaign_cases(name_or_path, scenarios=None, adapters=None) -> list[tuple[st
 
     Raises
     ------
-    harness.run.spec.CampaignError
+    mbh._harness.run.spec.CampaignError
         For a campaign file with mistakes (every one named).
     """
     keep = Selection.of(scenarios, adapters)
@@ -112,7 +112,7 @@ class Selection:
         ToleranceError
             Naming an unknown scenario or adapter and the known ones.
         """
-        from adapters import adapter_names
+        from mbh._adapters import adapter_names
 
         def names(text, known, option, is_known=None):
             is_known = is_known or known.__contains__
@@ -146,7 +146,7 @@ class SessionCase:
     ----------
     spec : CaseSpec
     result : CaseResult
-        The case's result (:func:`harness.run.row.run_spec`): the judged trajectory, sampled
+        The case's result (:func:`mbh._harness.run.row.run_spec`): the judged trajectory, sampled
         every 10 ms, and the campaign row (status, reason, errors, wall time…).
     mechanism : Mechanism
     reference : Trajectory or None
@@ -163,7 +163,7 @@ class SessionCase:
 
     @property
     def row(self) -> dict:
-        """The campaign row (:func:`harness.run.row.run_spec`)."""
+        """The campaign row (:func:`mbh._harness.run.row.run_spec`)."""
         return self.result.row
 
     @property
@@ -215,14 +215,14 @@ class SessionCase:
 
 @dataclass(frozen=True)
 class IsolatedWork:
-    """What an isolated case's worker process does: :func:`harness.run.row.run_spec`, returning
-    (row, the whole result) for :func:`harness.run.executor.run_isolated`.  Picklable."""
+    """What an isolated case's worker process does: :func:`mbh._harness.run.row.run_spec`, returning
+    (row, the whole result) for :func:`mbh._harness.run.executor.run_isolated`.  Picklable."""
 
     bounds: Bounds
     accuracy: float
 
     def __call__(self, spec: CaseSpec) -> tuple[dict, CaseResult]:
-        from harness.run.row import run_spec
+        from mbh._harness.run.row import run_spec
 
         result = run_spec(spec, self.bounds, self.accuracy)
         return result.row, result
@@ -234,7 +234,7 @@ class CaseRunner:
     Parameters
     ----------
     bounds : Bounds
-        The verdict's bounds (:mod:`harness.measure.verdict`).
+        The verdict's bounds (:mod:`mbh._harness.measure.verdict`).
     accuracy : float
         The ``accurate`` column's threshold on the main output's error, rad or m.
     """
@@ -262,7 +262,7 @@ class CaseRunner:
         return self._references[scenario_name]
 
     def calibration_s(self) -> float:
-        """The session's machine-speed figure, s (:func:`~harness.common.machine_speed.machine_speed_s`,
+        """The session's machine-speed figure, s (:func:`~mbh._harness.common.machine_speed.machine_speed_s`,
         measured in this process on first call).  It times numpy and scipy only, not this
         project's code, so a calibrated time changes with the case, not with the harness."""
         if self._calibration_s is None:
@@ -281,15 +281,15 @@ class CaseRunner:
         return self._results[spec.case_id]
 
     def _in_process(self, spec: CaseSpec) -> CaseResult:
-        from harness.run.row import run_spec
+        from mbh._harness.run.row import run_spec
 
         return run_spec(spec, self.bounds, self.accuracy)
 
     def _isolated(self, spec: CaseSpec) -> CaseResult:
         """``spec`` run in a worker process; a case that gave no result (crash, timeout) becomes
         an empty trajectory with the row's status and reason (the signal or exit code)."""
-        from harness.run.executor import WorkerProcesses, run_isolated
-        from harness.run.row import error_row
+        from mbh._harness.run.executor import WorkerProcesses, run_isolated
+        from mbh._harness.run.row import error_row
 
         if self._workers is None:
             self._workers = WorkerProcesses(warm=True)

@@ -1,13 +1,13 @@
 """The ``mbh`` pytest plugin (entry point ``pytest11``, registered by installing the package).
 
-Thin wrappers over :mod:`harness.testing.cases` and :mod:`harness.testing.tolerances`:
+Thin wrappers over :mod:`mbh._harness.testing.cases` and :mod:`mbh._harness.testing.tolerances`:
 
-* fixture ``mbh_runner`` (session): a :class:`~harness.testing.cases.CaseRunner` whose finished
+* fixture ``mbh_runner`` (session): a :class:`~mbh._harness.testing.cases.CaseRunner` whose finished
   cases are kept for the whole session; a case of a scenario or adapter not selected on the
   command line is skipped with the reason;
 * fixture ``mbh_reference``: ``mbh_reference("fourbar")`` → the scenario's verified reference
-  (a :class:`~harness.model.trajectory.Trajectory`, None when it has none);
-* fixture ``mbh_tolerances``: the :class:`~harness.testing.tolerances.Tolerances` of ``tolerances.toml``
+  (a :class:`~mbh._harness.model.trajectory.Trajectory`, None when it has none);
+* fixture ``mbh_tolerances``: the :class:`~mbh._harness.testing.tolerances.Tolerances` of ``tolerances.toml``
   beside the test file (``--mbh-tolerances FILE`` names another), loaded once per file;
 * :func:`campaign_params`: a campaign's cases as ``pytest.param`` objects with readable ids
   (``fourbar-mujoco-best-dt1e-3``), for ``@pytest.mark.parametrize``;
@@ -19,7 +19,7 @@ Thin wrappers over :mod:`harness.testing.cases` and :mod:`harness.testing.tolera
   the session goes on.  In-process is the default: isolation costs a process start per case
   (docs/formats/tolerances.md, "Isolated cases", gives the measured cost).
 
-The assertion helpers are the plain functions of :mod:`harness.testing.tolerances`.  This module imports
+The assertion helpers are the plain functions of :mod:`mbh._harness.testing.tolerances`.  This module imports
 nothing heavy at load time: pytest loads it in every session of this environment.
 """
 
@@ -55,7 +55,7 @@ def pytest_configure(config) -> None:
 
 
 def _selection(config):
-    from harness.testing.cases import Selection, ToleranceError
+    from mbh._harness.testing.cases import Selection, ToleranceError
 
     try:
         return Selection.parse(config.getoption("--mbh-scenarios"),
@@ -66,7 +66,7 @@ def _selection(config):
 
 def _specs(value) -> list:
     """The CaseSpecs in a parameter value (a case, or a list/tuple of cases)."""
-    from harness.run.spec import CaseSpec
+    from mbh._harness.run.spec import CaseSpec
 
     values = value if isinstance(value, (list, tuple)) else [value]
     return [item for item in values if isinstance(item, CaseSpec)]
@@ -89,8 +89,8 @@ def pytest_collection_modifyitems(config, items) -> None:
 
 def campaign_params(name_or_path, scenarios=None, adapters=None) -> list:
     """A campaign's cases as ``pytest.param(case, id=label)``
-    (:func:`harness.testing.cases.campaign_cases`, same arguments)."""
-    from harness.testing.cases import campaign_cases
+    (:func:`mbh._harness.testing.cases.campaign_cases`, same arguments)."""
+    from mbh._harness.testing.cases import campaign_cases
 
     return [pytest.param(spec, id=label)
             for label, spec in campaign_cases(name_or_path, scenarios, adapters)]
@@ -114,7 +114,7 @@ class _SelectingRunner:
         return self._runner.run(spec, isolated=self.isolated)
 
     def case(self, *args, **kwargs):
-        from harness.testing.cases import case_spec
+        from mbh._harness.testing.cases import case_spec
 
         return self.run(case_spec(*args, **kwargs))
 
@@ -124,9 +124,9 @@ class _SelectingRunner:
 
 @pytest.fixture(scope="session")
 def mbh_runner(request):
-    """The session's :class:`harness.testing.cases.CaseRunner` (``run``, ``case``, ``steps``,
+    """The session's :class:`mbh._harness.testing.cases.CaseRunner` (``run``, ``case``, ``steps``,
     ``reference``, ``calibration_s``)."""
-    from harness.testing.cases import CaseRunner
+    from mbh._harness.testing.cases import CaseRunner
 
     return _SelectingRunner(CaseRunner(), _selection(request.config))
 
@@ -154,9 +154,9 @@ def _mbh_tolerance_files():
 
 @pytest.fixture
 def mbh_tolerances(request, _mbh_tolerance_files):
-    """The :class:`harness.testing.tolerances.Tolerances` beside the test file (or
+    """The :class:`mbh._harness.testing.tolerances.Tolerances` beside the test file (or
     ``--mbh-tolerances``); ``mbh_tolerances.for_case(case)`` → the case's tolerances."""
-    from harness.testing.tolerances import Tolerances
+    from mbh._harness.testing.tolerances import Tolerances
 
     chosen = request.config.getoption("--mbh-tolerances")
     path = Path(chosen) if chosen else Path(request.path).parent / TOLERANCE_FILE

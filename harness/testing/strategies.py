@@ -6,8 +6,8 @@ geometry into the two bodies' frames, so the drawn configuration satisfies every
 Two families cover the shapes the adapters must translate:
 
 * :func:`trees` — open chains and trees of up to :data:`MAX_TREE_BODIES` bodies with every joint
-  type of the mechanism's kind (:data:`~harness.model.mechanism.JOINT_TYPES`, planar
-  :data:`~harness.model.mechanism.PLANAR_JOINT_TYPES`);
+  type of the mechanism's kind (:data:`~mbh._harness.model.mechanism.JOINT_TYPES`, planar
+  :data:`~mbh._harness.model.mechanism.PLANAR_JOINT_TYPES`);
 * :func:`ladders` — the N-four-bar family (IFToMM benchmark library): N + 1 cranks on ground
   pivots, N couplers between consecutive crank tips, N closed loops of four bars.  Planar ladders
   use revolute joints; spatial ones revolute cranks, a spherical joint at one end of each coupler
@@ -15,7 +15,7 @@ Two families cover the shapes the adapters must translate:
   mobility 1, the coupler's spin about its line held away from singularity).
 
 Masses, inertias (optionally slender: one principal moment zero), gravity, the applied loads of
-:mod:`harness.model.mechanism` and the driver rate are drawn too, and :func:`mechanisms` shuffles the
+:mod:`mbh._harness.model.mechanism` and the driver rate are drawn too, and :func:`mechanisms` shuffles the
 declaration order of bodies and joints (:func:`redeclare`), which must never change an answer.
 
 Needs Hypothesis (the ``test`` extra of ``pyproject.toml``); nothing else in the harness imports
@@ -30,7 +30,7 @@ import numpy as np
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from harness.model.mechanism import (
+from mbh._harness.model.mechanism import (
     DRIVABLE,
     GROUND,
     JOINT_TYPES,
@@ -331,7 +331,7 @@ def aligned_mechanisms(draw, planar: bool | None = None) -> Mechanism:
         joints=tuple(joints), forces=tuple(forces), gravity=gravity,
         initial=InitialState(driver="j0", value=0.0,
                              rate=draw(st.sampled_from([0.0, 1.0, -1.0]))),
-        duration=1.0, outputs=(), tags=("generated",), source="harness.testing.strategies")
+        duration=1.0, outputs=(), tags=("generated",), source="mbh._harness.testing.strategies")
     return _with_hash(mech)
 
 
@@ -400,7 +400,7 @@ def mechanisms(draw, planar: bool | None = None, allow_slender: bool = True,
         forces=draw(_forces(bodies, joints, planar)), gravity=gravity,
         initial=InitialState(driver=driver, value=0.0,
                              rate=draw(st.sampled_from([-1.0, 1.0])) * draw(st.floats(0.2, 2.0))),
-        duration=1.0, outputs=(), tags=("generated",), source="harness.testing.strategies")
+        duration=1.0, outputs=(), tags=("generated",), source="mbh._harness.testing.strategies")
     if shuffle:
         mech = redeclare(mech, draw(st.permutations(range(len(bodies)))),
                          draw(st.permutations(range(len(joints)))))

@@ -1,7 +1,7 @@
 """Tolerance assertions on harness cases, usable with or without pytest.
 
-The pytest plugin (:mod:`harness.testing.plugin`) is a thin layer over what is here and over
-:class:`harness.testing.cases.CaseRunner`, which runs the cases the assertions look at:
+The pytest plugin (:mod:`mbh._harness.testing.plugin`) is a thin layer over what is here and over
+:class:`mbh._harness.testing.cases.CaseRunner`, which runs the cases the assertions look at:
 
 * assertion helpers (``assert_*``) that raise ``AssertionError`` with a message naming the case
   and, for series, the worst sample's time, the value, the reference, the difference and the
@@ -16,7 +16,7 @@ case are merged, the more specific ones over the less specific)::
     status = "ok"                         # punctuation: [fourbar.inhouse."rk4+direct"])
     outputs = { crank_angle = { atol = 2e-6, rtol = 0.0 } }   # |y - y_ref| <= atol + rtol |y_ref|
     constraint_violation = 1e-6           # m, the largest joint gap (orientation residuals as
-                                          # lever-length × angle), see harness.measure.metrics
+                                          # lever-length × angle), see mbh._harness.measure.metrics
     energy_error = 1e-5                   # |energy-balance error| / the energy scale
     order = [1.8, 2.2]                    # band of the measured convergence order
     [fourbar.mujoco.best.dt."1e-2"]       # optional: overrides for one step size (s)
@@ -34,12 +34,12 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.run.spec import CaseSpec, main_output
-from harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
-from harness.measure.energy import energy_balance, energy_scale
-from harness.measure.metrics import lever_length, violation_series
-from harness.model.scenario import finite_number, read_toml
-from harness.model.trajectory import STATUSES
+from mbh._harness.run.spec import CaseSpec, main_output
+from mbh._harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
+from mbh._harness.measure.energy import energy_balance, energy_scale
+from mbh._harness.measure.metrics import lever_length, violation_series
+from mbh._harness.model.scenario import finite_number, read_toml
+from mbh._harness.model.trajectory import STATUSES
 
 #: Keys a tolerance entry may hold.
 ENTRY_KEYS = ("status", "outputs", "constraint_violation", "energy_error", "order", "dt")
@@ -78,7 +78,7 @@ def _no_samples(result: SessionCase) -> None:
 
 
 def assert_status(result: SessionCase, expected: str = "ok") -> None:
-    """The case ended with status ``expected`` (:data:`harness.model.trajectory.STATUSES`)."""
+    """The case ended with status ``expected`` (:data:`mbh._harness.model.trajectory.STATUSES`)."""
     __tracebackhide__ = True
     if expected not in STATUSES:
         raise ToleranceError(f"expected status {expected!r} is not one of {', '.join(STATUSES)}")
@@ -144,7 +144,7 @@ def _series_below(result: SessionCase, what: str, series: np.ndarray, bound: flo
 def constraint_violation_series(result: SessionCase) -> np.ndarray:
     """Per-sample position-level constraint violation, m, shape (n_samples,): the larger of the
     joint gap and the orientation residual × the lever length (the per-sample figure whose
-    maximum is :func:`harness.measure.metrics.constraint_violations`' ``max_constraint_violation``)."""
+    maximum is :func:`mbh._harness.measure.metrics.constraint_violations`' ``max_constraint_violation``)."""
     series = violation_series(result.mechanism, result.trajectory)
     return np.maximum(series["joint_gap_m"],
                       lever_length(result.mechanism) * series["orientation_rad"])
@@ -152,7 +152,7 @@ def constraint_violation_series(result: SessionCase) -> np.ndarray:
 
 def energy_error_series(result: SessionCase) -> np.ndarray:
     """Per-sample |energy-balance error| / the energy scale, shape (n_samples,)
-    (:func:`harness.measure.energy.energy_balance`, :func:`harness.measure.energy.energy_scale`)."""
+    (:func:`mbh._harness.measure.energy.energy_balance`, :func:`mbh._harness.measure.energy.energy_scale`)."""
     if result.reference is None:
         raise AssertionError(f"{result.describe()}: no verified reference, so no energy scale")
     scale = energy_scale(result.mechanism, result.reference)

@@ -23,7 +23,7 @@ TOY = ROOT / "tests" / "data" / "mbh_toy_adapter"
 
 #: A user's test file holding the toy adapter to the reference through the plugin.
 USER_TEST = """\
-from harness.testing.tolerances import assert_close_to_reference, assert_status
+from mbh._harness.testing.tolerances import assert_close_to_reference, assert_status
 
 
 def test_my_solver_on_the_fourbar(mbh_runner):

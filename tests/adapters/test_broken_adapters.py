@@ -16,11 +16,11 @@ import sys
 
 import pytest
 
-from harness.cli import main
-from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
-from harness.run.row import run_spec
-from harness.run.spec import CaseSpec, load_campaign
-from harness.store.runs import RunStore
+from mbh._harness.cli import main
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
+from mbh._harness.run.row import run_spec
+from mbh._harness.run.spec import CaseSpec, load_campaign
+from mbh._harness.store.runs import RunStore
 from tests.adapters.conftest import write_distribution
 
 PACKAGE = "mbh-broken-adapters 0.0.1"
@@ -91,7 +91,7 @@ EXPECTED = {
     "not_an_adapter": (f"adapter 'not_an_adapter' from package {PACKAGE} cannot be loaded "
                        "(mbh_broken_adapters:NotAnAdapter): TypeError: "
                        "mbh_broken_adapters:NotAnAdapter is not a subclass of "
-                       "adapters.base.Adapter", 0.0, 0),
+                       "mbh._adapters.base.Adapter", 0.0, 0),
     "broken_version": (f"adapter 'broken_version' from package {PACKAGE}, in version(): "
                        "OSError: no version file", 0.0, 0),
     "broken_build": (f"adapter 'broken_build' from package {PACKAGE}, in build: "
@@ -164,7 +164,7 @@ def test_mbh_run_stores_a_row_for_every_broken_case(toy_environment, tmp_path):
     campaign.write_text(f'calibration = false\n[[group]]\nscenarios = ["fourbar"]\n'
                         f'adapters = [{names}]\nmethods = ["best"]\ndts = [1e-2]\n'
                         f'[t_end]\n"*" = 0.2\n')
-    done = subprocess.run([sys.executable, "-m", "harness.cli", "run", str(campaign), "--root",
+    done = subprocess.run([sys.executable, "-m", "mbh._harness.cli", "run", str(campaign), "--root",
                            str(tmp_path / "results"), "--quiet", "--workers", "2"],
                           env=environment, capture_output=True, text=True, timeout=600,
                           check=False)

@@ -1,4 +1,4 @@
-"""The joint-coordinate engines' one closure contract (:data:`adapters.base.UNCLOSABLE`):
+"""The joint-coordinate engines' one closure contract (:data:`mbh._adapters.base.UNCLOSABLE`):
 ``closure_equations(mech, joint) -> int`` in each builder, with the numbers each engine closes
 a cut joint with."""
 
@@ -9,8 +9,8 @@ from types import SimpleNamespace
 
 import pytest
 
-from adapters.base import UNCLOSABLE
-from harness.model.mechanism import JOINT_TYPES
+from mbh._adapters.base import UNCLOSABLE
+from mbh._harness.model.mechanism import JOINT_TYPES
 
 #: (planar, joint type) → equations, per engine; every other pair is UNCLOSABLE.
 CLOSABLE = {
@@ -24,7 +24,7 @@ CLOSABLE = {
 
 @pytest.mark.parametrize("engine", sorted(CLOSABLE))
 def test_closure_equations_contract(engine):
-    build = pytest.importorskip(f"adapters.{engine}_adapter.build")
+    build = pytest.importorskip(f"mbh._adapters.{engine}_adapter.build")
     assert list(inspect.signature(build.closure_equations).parameters) == ["mech", "joint"]
     for planar in (True, False):
         for kind in JOINT_TYPES:

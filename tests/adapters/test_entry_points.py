@@ -14,15 +14,15 @@ import sys
 
 import pytest
 
-import adapters
-from adapters import AdapterClashWarning, UnknownAdapterError
-from harness.cli import main
-from harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
-from harness.report import summary
-from harness.run.row import run_spec
-from harness.run.spec import CampaignError, CaseSpec, load_campaign
-from harness.store.runs import RunStore
-from harness.testing.cases import Selection, ToleranceError
+import mbh._adapters as adapters
+from mbh._adapters import AdapterClashWarning, UnknownAdapterError
+from mbh._harness.cli import main
+from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS
+from mbh._harness.report import summary
+from mbh._harness.run.row import run_spec
+from mbh._harness.run.spec import CampaignError, CaseSpec, load_campaign
+from mbh._harness.store.runs import RunStore
+from mbh._harness.testing.cases import Selection, ToleranceError
 from tests.adapters.conftest import USER_TEST, toy_project, write_distribution
 
 TOY_PACKAGE = f"{toy_project()['name']} {toy_project()['version']}"
@@ -49,15 +49,15 @@ dts = [1e-2]
 
 
 def test_listing_the_adapters_imports_no_engine(toy_environment):
-    probe = ("import sys, adapters; names = adapters.adapter_names(); "
+    probe = ("import sys, mbh._adapters as adapters; names = adapters.adapter_names(); "
              "print(names); print(sorted(m for m in sys.modules if m.split('.')[0] in "
              "('mujoco', 'pybullet', 'pinocchio', 'exudyn', 'mbh_toy_adapter') "
-             "or m.startswith('adapters.')))")
+             "or m.startswith('mbh._adapters.')))")
     done = subprocess.run([sys.executable, "-c", probe], env=toy_environment,
                           capture_output=True, text=True, timeout=60, check=True)
     names, imported = done.stdout.splitlines()
     assert names == str([*adapters.BUILT_IN, "toy"])
-    assert imported == "['adapters.base']"
+    assert imported == "['mbh._adapters.base']"
 
 
 def test_the_toy_adapter_is_registered_with_its_package(toy):

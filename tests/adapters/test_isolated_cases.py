@@ -25,7 +25,7 @@ class CrashingAdapter(ToyAdapter):
 USER_SUITE = '''
 import pytest
 
-from harness.testing.tolerances import assert_status
+from mbh._harness.testing.tolerances import assert_status
 
 
 MARKER

@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from harness import cli
+from mbh._harness import cli
 
 REQUIRED = {"status", "reason", "failure_time", "wall_time_s", "steps", "rhs_evals", "outputs",
             "max_constraint_violation", "max_velocity_violation", "max_energy_error_J",
@@ -91,7 +91,7 @@ def test_methods_lists_default_and_best_for_every_adapter(capsys):
 
 def test_scenarios_with_no_scenario_files_says_where_it_looked(capsys, monkeypatch, tmp_path):
     # As in an installed package that ships no scenario files: a header, no traceback.
-    from harness.model import scenario
+    from mbh._harness.model import scenario
 
     monkeypatch.setattr(scenario, "SCENARIO_DIR", tmp_path)
     assert cli.main(["scenarios"]) == 0

@@ -11,10 +11,10 @@ import sys
 import numpy as np
 import pytest
 
-from harness import cli
+from mbh._harness import cli
 
-from harness.common import jsonout
-from harness.common.capture import captured_output, engine_note
+from mbh._harness.common import jsonout
+from mbh._harness.common.capture import captured_output, engine_note
 from tests.helpers import ROOT
 
 
@@ -28,7 +28,7 @@ def strict_loads(text: str):
 
 
 def mbh(*argv: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "harness.cli", *argv], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "mbh._harness.cli", *argv], capture_output=True,
                           text=True, timeout=600, cwd=ROOT)
 
 
@@ -104,7 +104,7 @@ def test_listings_are_strict_json(capsys, argv):
 #: write) before and after the command's own work, as a solver or an engine makes them.
 _NOISY_MAIN = """
 import ctypes, os, sys
-from harness import cli
+from mbh._harness import cli
 
 libc = ctypes.CDLL(None)
 real_parser = cli.build_parser

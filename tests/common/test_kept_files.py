@@ -1,4 +1,4 @@
-"""Files kept by the warm template (harness.common.kept_files): kept only inside ``keeping()``,
+"""Files kept by the warm template (mbh._harness.common.kept_files): kept only inside ``keeping()``,
 returned while the files are unchanged, read again once a file is replaced or rewritten."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from harness.common.kept_files import identity, keeping, read_kept
+from mbh._harness.common.kept_files import identity, keeping, read_kept
 
 
 class _Reader:

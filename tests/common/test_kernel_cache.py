@@ -18,16 +18,16 @@ from pathlib import Path
 import pytest
 from numba.core import caching
 
-from harness.common import file_lock, kernel_cache
+from mbh._harness.common import file_lock, kernel_cache
 
 ROOT = Path(__file__).resolve().parents[2]
 #: Prints Φ of the four-bar at its reference coordinates: kernels.phi (kernels.py) inlines
 #: bodykin._with_origin (bodykin.py), the function the test edits.
 PHI_SCRIPT = """
 import json
-from adapters.inhouse import kernels
-from adapters.inhouse.constraints import ConstraintSystem, reference_coordinates
-from harness.model import scenario
+from mbh._adapters.inhouse import kernels
+from mbh._adapters.inhouse.constraints import ConstraintSystem, reference_coordinates
+from mbh._harness.model import scenario
 mech = scenario.load("fourbar")
 print(json.dumps(kernels.phi(reference_coordinates(mech), 0.0,
                              ConstraintSystem(mech).kernel_args).tolist()))
@@ -38,13 +38,17 @@ EDITED = "    return x + coordinates[k] + 1.0, y + coordinates[k + 1], z\n"
 
 
 def _copy_of_the_package(folder: Path) -> Path:
-    """adapters/, harness/ and the scenario files copied to ``folder`` (no numba caches)."""
+    """The package laid out as a wheel installs it (mbh/, mbh/_harness from harness/,
+    mbh/_adapters from adapters/, the scenario files in mbh/_harness/scenarios) under ``folder``,
+    without numba caches."""
     ignore = shutil.ignore_patterns("__pycache__")
-    for package in ("adapters", "harness"):
-        shutil.copytree(ROOT / package, folder / package, ignore=ignore)
-    (folder / "scenarios").mkdir()
+    package = folder / "mbh"
+    shutil.copytree(ROOT / "mbh", package, ignore=ignore)
+    for source, mapped in (("harness", "_harness"), ("adapters", "_adapters")):
+        shutil.copytree(ROOT / source, package / mapped, ignore=ignore)
+    (package / "_harness" / "scenarios").mkdir()
     for scene in (ROOT / "scenarios").glob("*.toml"):
-        shutil.copy(scene, folder / "scenarios")
+        shutil.copy(scene, package / "_harness" / "scenarios")
     return folder
 
 
@@ -63,7 +67,7 @@ def test_a_kernel_changed_in_another_file_than_its_caller_is_compiled_again(tmp_
     warm; the test ~20 s."""
     copy, cache = _copy_of_the_package(tmp_path / "copy"), tmp_path / "cache"
     before = _phi(copy, cache)
-    bodykin = copy / "adapters" / "inhouse" / "bodykin.py"
+    bodykin = copy / "mbh" / "_adapters" / "inhouse" / "bodykin.py"
     assert bodykin.read_text().count(ORIGINAL) == 1
     bodykin.write_text(bodykin.read_text().replace(ORIGINAL, EDITED))
     after = _phi(copy, cache)
@@ -104,7 +108,7 @@ def _imported_from(path: Path) -> dict[str, str]:
 
 
 def _project_file(module_name: str) -> Path | None:
-    if module_name.split(".")[0] not in ("harness", "adapters"):
+    if module_name.split(".")[:2] not in (["mbh", "_harness"], ["mbh", "_adapters"]):
         return None
     return Path(inspect.getfile(importlib.import_module(module_name))).resolve()
 
@@ -115,7 +119,7 @@ def test_every_global_a_compiled_kernel_reads_is_in_the_fingerprint():
     sources = set(kernel_cache.kernel_sources())
     kernels = {}
     for package in kernel_cache.KERNEL_PACKAGES:
-        prefix = ".".join(package.relative_to(ROOT).parts)
+        prefix = "mbh._" + ".".join(package.relative_to(ROOT).parts)
         for path in sorted(package.glob("*.py")):
             module = importlib.import_module(prefix if path.stem == "__init__" else
                                              f"{prefix}.{path.stem}")

@@ -8,11 +8,11 @@ import math
 import numpy as np
 import scipy
 
-from harness.common.machine_speed import machine_speed_s, workload_name
-from harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
-from harness.run.spec import CaseSpec
-from harness.store.compare import comparable_calibrations
-from harness.store.runs import RunStore
+from mbh._harness.common.machine_speed import machine_speed_s, workload_name
+from mbh._harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
+from mbh._harness.run.spec import CaseSpec
+from mbh._harness.store.compare import comparable_calibrations
+from mbh._harness.store.runs import RunStore
 
 
 class _Campaign:

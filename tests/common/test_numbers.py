@@ -1,4 +1,4 @@
-"""The one number formatter and the one stored-value conversion (:mod:`harness.common.numbers`)."""
+"""The one number formatter and the one stored-value conversion (:mod:`mbh._harness.common.numbers`)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import pandas as pd
 
-from harness.common.numbers import as_float, float_or_nan, format_number
+from mbh._harness.common.numbers import as_float, float_or_nan, format_number
 
 
 def test_format_number():

@@ -6,7 +6,7 @@ from __future__ import annotations
 import io
 import sys
 
-from harness.common import waits
+from mbh._harness.common import waits
 
 
 def test_a_wait_is_said_before_and_its_length_after(monkeypatch):

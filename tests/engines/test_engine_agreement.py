@@ -17,7 +17,7 @@ below that.  The check is sensitive: 1 ppm more coupler mass in the Pinocchio mo
 agreement.
 
 Measured on 2026-11-23 with :func:`max_differences` (evaluation grid of
-:func:`harness.model.timegrid.sample_times`, 10 ms).  A test allows :data:`MARGIN` × the measured
+:func:`mbh._harness.model.timegrid.sample_times`, 10 ms).  A test allows :data:`MARGIN` × the measured
 figure, and never less than :data:`ROUNDOFF` × the quantity's range over the run (a bound below
 that would assert round-off, which differs between CPUs).  The two engines' own errors against
 the reference are correlated (slider_crank_planar, dt = 1e-3, full run: crank angle 3.56e-5 rad
@@ -33,11 +33,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.model.outputs import output_series
-from harness.model.timegrid import sample_times
-from harness.model.trajectory import Trajectory
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.timegrid import sample_times
+from mbh._harness.model.trajectory import Trajectory
 
 ENGINES = ("inhouse", "pinocchio")
 SCENARIOS = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
@@ -130,7 +130,7 @@ def max_differences(name: str, dt: float, t_end: float | None = None):
     Returns
     -------
     trajectories : dict
-        Engine name → :class:`~harness.model.trajectory.Trajectory`.
+        Engine name → :class:`~mbh._harness.model.trajectory.Trajectory`.
     differences : dict
         Quantity → max over samples of |in-house − Pinocchio| (a centre of mass: Euclidean
         distance), in the quantity's unit.

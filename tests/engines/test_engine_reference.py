@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import pytest
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.neutral.start import initial_state
-from harness.measure.metrics import case_metrics
-from harness.references.build import reference_trajectory
-from harness.model.timegrid import sample_times
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.measure.metrics import case_metrics
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.model.timegrid import sample_times
 
 T_END = 1.0
 MARGIN = 3.0

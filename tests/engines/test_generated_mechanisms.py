@@ -1,19 +1,19 @@
 """Property-based suite: every adapter on generated mechanisms (issue 9, item 1).
 
-Mechanisms come from :mod:`harness.testing.strategies` — planar and spatial trees of up to 6 bodies with
+Mechanisms come from :mod:`mbh._harness.testing.strategies` — planar and spatial trees of up to 6 bodies with
 every joint type, N-four-bar ladders with up to 2 closed loops (5 bodies), random masses and
 inertias (slender bodies included), loads and declaration orders.  For every adapter that can
-build a mechanism (an :class:`~adapters.base.UnsupportedCase` is counted as a Hypothesis event
+build a mechanism (an :class:`~mbh._adapters.base.UnsupportedCase` is counted as a Hypothesis event
 and skipped) the suite checks
 
 (a) the start: the first sample reads back the harness's assembled state;
 (b) the dynamics: the engine's accelerations at t = 0 equal the neutral model's index-1
-    accelerations (:mod:`harness.neutral.dynamics`), which catches a wrong mass matrix;
+    accelerations (:mod:`mbh._harness.neutral.dynamics`), which catches a wrong mass matrix;
 (c) the declaration order: the same mechanism declared in two orders gives the same trajectory.
 
 Engine accelerations (b) are measured from the engine's own run with ``best``: the one-sided
 fourth-order difference (−25 v(0) + 48 v(T) − 36 v(2T) + 16 v(3T) − 3 v(4T)) / (12T)
-(:func:`~harness.neutral.dynamics.start_accelerations`) of the velocities sampled every
+(:func:`~mbh._harness.neutral.dynamics.start_accelerations`) of the velocities sampled every
 T = :data:`tests.helpers.ACCELERATION_SPAN`, each adapter stepping at its ``ACCELERATION_STEP``
 (the constants and the measurement, shared with the Exudyn adapter's tests, are in
 :mod:`tests.helpers`).  (The
@@ -24,7 +24,7 @@ misses the quadratic velocity term of the closure acceleration (an error |γ| at
 corrected by the next steps' error reduction): it steps at 1e-6 s, so that first step weighs
 1/250 of T (measured 5.7e-3 relative on that ladder, 1.4e-2 at 2.5e-6 s, 5.7e-2 at 1e-5 s).
 Mechanisms whose accelerations are not unique (a slender bar free to spin about its own axis,
-:class:`~harness.neutral.dynamics.IndeterminateAccelerations`) are rejected: any spin rate solves
+:class:`~mbh._harness.neutral.dynamics.IndeterminateAccelerations`) are rejected: any spin rate solves
 their equations, so no engine can be held to one.
 
 Profiles: the default suite runs :data:`DEFAULT_EXAMPLES` derandomized examples per adapter and
@@ -42,20 +42,20 @@ from hypothesis import HealthCheck, event, given, reject, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from adapters import adapter_names, get_adapter
-from adapters.base import UnsupportedCase
-from harness.neutral.assembly import AssemblyError
-from harness.testing.strategies import mechanisms, redeclare
-from harness.neutral.start import initial_state
-from harness.neutral.equations import JointEquations
-from harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
-from harness.neutral.dynamics import (
+from mbh._adapters import adapter_names, get_adapter
+from mbh._adapters.base import UnsupportedCase
+from mbh._harness.neutral.assembly import AssemblyError
+from mbh._harness.testing.strategies import mechanisms, redeclare
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
+from mbh._harness.neutral.dynamics import (
     IndeterminateAccelerations,
     accelerations,
 )
-from harness.model.scenario import load
-from harness.model.topology import spanning_tree
-from harness.model.trajectory import BodyStates
+from mbh._harness.model.scenario import load
+from mbh._harness.model.topology import spanning_tree
+from mbh._harness.model.trajectory import BodyStates
 from tests.helpers import ACCELERATION_TOLERANCE, DATA, measured_acceleration_gap
 
 #: The IFToMM N-four-bar (N = 2) declared breadth-first, the order of issue 9.

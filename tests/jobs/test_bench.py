@@ -8,9 +8,9 @@ import math
 import pandas as pd
 import pytest
 
-from harness.jobs import bench
-from harness.cli import main
-from harness.report.summary import front_ratio_table
+from mbh._harness.jobs import bench
+from mbh._harness.cli import main
+from mbh._harness.report.summary import front_ratio_table
 
 
 def _case(adapter, method, dt, error, wall, status="ok"):

@@ -6,7 +6,7 @@ at dt 1e-4 s, ~11 ms a run, Pinocchio at 1e-3 s, ~40 ms) in a temporary results 
 an in-house run took ~1.1 ms, and one preemption by the scheduler (~4 ms, the test session's and
 the campaign's workers sharing two cores) made a repetition ×4–5 slower: a `make test` run saw
 two of three repetitions so, and the gate flagged both in-house cases.  The regressions are
-injected by replacing the nightly's work function (``harness.jobs.nightly.case_work``, pytest
+injected by replacing the nightly's work function (``mbh._harness.jobs.nightly.case_work``, pytest
 ``monkeypatch``) with one that reports one case's error 1000 times larger and another case's
 wall time 10,000 times longer; the adapters have no such switch.  Measured calibrated time
 ratios between two plain runs: 0.78–1.2 on an idle machine, up to 2.03 with a second test
@@ -23,11 +23,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from harness import cli
+from mbh._harness import cli
 
-from harness.jobs import nightly
-from harness.run.row import CaseWork
-from harness.store.runs import list_runs
+from mbh._harness.jobs import nightly
+from mbh._harness.run.row import CaseWork
+from mbh._harness.store.runs import list_runs
 from tests.helpers import ROOT
 
 CAMPAIGN = """

@@ -23,13 +23,13 @@ from dataclasses import dataclass
 
 import pytest
 
-from harness import cli
-from harness.common.machine_speed import workload_name
-from harness.jobs import nightly
-from harness.run import campaign as campaign_run
-from harness.run.calibration import CALIBRATION, WithCalibration
-from harness.run.row import CaseWork
-from harness.store.runs import list_runs
+from mbh._harness import cli
+from mbh._harness.common.machine_speed import workload_name
+from mbh._harness.jobs import nightly
+from mbh._harness.run import campaign as campaign_run
+from mbh._harness.run.calibration import CALIBRATION, WithCalibration
+from mbh._harness.run.row import CaseWork
+from mbh._harness.store.runs import list_runs
 from tests.helpers import run_mbh
 
 pytestmark = pytest.mark.slow  # five campaign runs and one report: about a minute

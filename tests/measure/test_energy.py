@@ -1,4 +1,4 @@
-"""The energy stick against closed-form motions (harness.measure.energy).
+"""The energy stick against closed-form motions (mbh._harness.measure.energy).
 
 Each test builds a small Mechanism and a Trajectory from an exact solution, so the balance
 e(t) = T + V − W − E₀ the stick reports is its own error.
@@ -11,14 +11,14 @@ import pytest
 from scipy.spatial.transform import Rotation
 from scipy.special import ellipj, ellipk
 
-from harness.measure.energy import (QUADRATURE_DEGREE, cumulative_quadrature, energy_balance,
+from mbh._harness.measure.energy import (QUADRATURE_DEGREE, cumulative_quadrature, energy_balance,
                             energy_scale, interval_work, kinetic_energy, state_arrays)
-from harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism,
+from mbh._harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism,
                            SpringDamper)
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 
 G = np.array([0.0, -9.81, 0.0])
-STEP = 0.01  # the evaluation grid step (harness.model.timegrid.EVALUATION_STEP)
+STEP = 0.01  # the evaluation grid step (mbh._harness.model.timegrid.EVALUATION_STEP)
 
 
 def mechanism(bodies, forces=(), gravity=G, kind="spatial", joints=()) -> Mechanism:

@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.measure.energy import energy_balance, energy_scale
-from harness.measure.metrics import case_metrics
-from harness.references.build import reference_trajectory
-from harness.model.timegrid import EVALUATION_STEP, sample_times
-from harness.model.trajectory import Trajectory
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.measure.energy import energy_balance, energy_scale
+from mbh._harness.measure.metrics import case_metrics
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.model.timegrid import EVALUATION_STEP, sample_times
+from mbh._harness.model.trajectory import Trajectory
 
 SHIPPED = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
 _ARRAYS = ("position", "quaternion", "velocity", "angular_velocity")

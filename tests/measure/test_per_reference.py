@@ -9,13 +9,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from harness.measure import per_reference as memo
-from harness.measure.metrics import case_metrics, reference_outputs
-from harness.measure.verdict import judge, prepare_reference
-from harness.model import scenario
-from harness.references.build import reference_trajectory
-from harness.run.case import simulate_case
+from mbh._adapters import get_adapter
+from mbh._harness.measure import per_reference as memo
+from mbh._harness.measure.metrics import case_metrics, reference_outputs
+from mbh._harness.measure.verdict import judge, prepare_reference
+from mbh._harness.model import scenario
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.run.case import simulate_case
 
 #: Trajectory arrays (the reference store returns them read-only).
 ARRAYS = ("times", "position", "quaternion", "velocity", "angular_velocity")

@@ -15,13 +15,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.run.case import run_case
-from harness.model.outputs import output_series
-from harness.references.build import reference_trajectory
-from harness.model.trajectory import Trajectory
-from harness.measure.verdict import Bounds, characteristic_length, joint_violations, judge
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.run.case import run_case
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.model.trajectory import Trajectory
+from mbh._harness.measure.verdict import Bounds, characteristic_length, joint_violations, judge
 
 STRIDE = 10  # reference samples per test sample: a 10 ms grid
 

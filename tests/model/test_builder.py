@@ -1,4 +1,4 @@
-"""The Python builder (harness.model.builder) is the file loader by other means: the same
+"""The Python builder (mbh._harness.model.builder) is the file loader by other means: the same
 document gives the same mechanism and hash, the same mistakes the same problems."""
 
 import tomllib
@@ -6,8 +6,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from harness.model import scenario
-from harness.model.builder import MechanismBuilder
+from mbh._harness.model import scenario
+from mbh._harness.model.builder import MechanismBuilder
 from tests.helpers import ROOT
 
 

@@ -20,13 +20,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from harness.model import scenario
-from harness.references.routes import full_route
-from harness.model.families import FAMILY_MEMBERS, FamilyError, family_document, family_names
-from harness.model.outputs import output_series
-from harness.references.build import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, \
+from mbh._harness.model import scenario
+from mbh._harness.references.routes import full_route
+from mbh._harness.model.families import FAMILY_MEMBERS, FamilyError, family_document, family_names
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, \
     reference_trajectory
-from harness.model.scenario import ScenarioError
+from mbh._harness.model.scenario import ScenarioError
 
 GRAVITY = 9.81
 #: Fields that name or describe a scene rather than its mechanics.

@@ -27,11 +27,11 @@ import pytest
 from hypothesis import event, example, given, settings
 from hypothesis import strategies as st
 
-from harness import cli
+from mbh._harness import cli
 
-from harness.model import scenario
-from harness.model.mechanism import GROUND, Mechanism
-from harness.model.scenario import ScenarioError
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import GROUND, Mechanism
+from mbh._harness.model.scenario import ScenarioError
 from tests.fuzzing import (BASE, NAMES, NUMBERS, SCENARIO_DOCUMENTS, SCENARIO_KEYS, VALUES,
                            VECTORS, assert_clean_mechanism, finite_numbers, fuzzed_file,
                            toml_document)

@@ -1,5 +1,5 @@
 """The Python mechanism builder, called with junk by the thousand (issue 31 item 5):
-:class:`harness.model.builder.MechanismBuilder`.
+:class:`mbh._harness.model.builder.MechanismBuilder`.
 
 Every example types a shipped scenario as builder calls (as tests/model/test_builder.py does),
 then Hypothesis changes them — random section calls (``body``, ``joint``, ``force``,
@@ -25,8 +25,8 @@ import pytest
 from hypothesis import event, example, given, settings
 from hypothesis import strategies as st
 
-from harness.model.builder import MAX_DEPTH, MechanismBuilder
-from harness.model.scenario import ScenarioError
+from mbh._harness.model.builder import MAX_DEPTH, MechanismBuilder
+from mbh._harness.model.scenario import ScenarioError
 from tests.fuzzing import (BASE, NAMES, NUMBERS, SCENARIO_DOCUMENTS, SCENARIO_KEYS, VALUES,
                            VECTORS, assert_clean_mechanism)
 
@@ -268,7 +268,7 @@ def test_what_no_file_can_hold_is_named_with_its_field():
 
 def test_a_huge_integer_in_a_scenario_file_is_a_clear_error(tmp_path):
     """The file loader's side of the first finding (both read through the same collector)."""
-    from harness.model import scenario
+    from mbh._harness.model import scenario
 
     path = tmp_path / "huge.toml"
     path.write_text("duration = 1" + "0" * 400 + "\n")

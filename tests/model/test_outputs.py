@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from harness.model.outputs import rotation_between, wrap_angle
+from mbh._harness.model.outputs import rotation_between, wrap_angle
 
 
 def _about_z(angle) -> np.ndarray:

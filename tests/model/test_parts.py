@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from harness.model import parts
-from harness.model.scenario import ScenarioError, from_document, load
+from mbh._harness.model import parts
+from mbh._harness.model.scenario import ScenarioError, from_document, load
 
 ROUND_OFF = 1e-15
 

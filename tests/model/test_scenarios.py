@@ -7,13 +7,13 @@ import pytest
 
 from scipy.spatial.transform import Rotation
 
-from harness import cli
+from mbh._harness import cli
 
-from harness.model import scenario
-from harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
-from harness.model.outputs import output_series
-from harness.model.scenario import ScenarioError, inertia_problem
-from harness.model.trajectory import Trajectory
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.scenario import ScenarioError, inertia_problem
+from mbh._harness.model.trajectory import Trajectory
 
 BAD = """
 kind = "spatial"

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from harness.model.mechanism import (
+from mbh._harness.model.mechanism import (
     PLANAR_JOINT_CLASS,
     SPATIAL_JOINT_CLASS,
     Body,
@@ -15,8 +15,8 @@ from harness.model.mechanism import (
     Joint,
     Mechanism,
 )
-from harness.model.scenario import load, scenario_names
-from harness.model.topology import angular_velocities, incidence_matrix, spanning_tree, system_graph
+from mbh._harness.model.scenario import load, scenario_names
+from mbh._harness.model.topology import angular_velocities, incidence_matrix, spanning_tree, system_graph
 
 
 def exact_closure(joint: Joint) -> int:
@@ -244,11 +244,11 @@ def test_angular_velocities_name_bad_shapes():
 def test_angular_velocity_map_matches_inhouse_velocities(name):
     """Joint rates measured from an in-house velocity analysis, mapped through the path matrix
     (Arczewski 1995, eq. 3/7), give back the in-house absolute angular velocities."""
-    from adapters.inhouse.constraints import layout_of
-    from adapters.inhouse.kinematics import assemble
-    from adapters.inhouse.states import body_states
-    from harness.model.mechanism import SPATIAL_JOINT_CLASS
-    from harness.model.outputs import body_rotations, joint_rate
+    from mbh._adapters.inhouse.constraints import layout_of
+    from mbh._adapters.inhouse.kinematics import assemble
+    from mbh._adapters.inhouse.states import body_states
+    from mbh._harness.model.mechanism import SPATIAL_JOINT_CLASS
+    from mbh._harness.model.outputs import body_rotations, joint_rate
 
     mech = load(name)
     assembly = assemble(mech, value=0.4, rate=1.7)
@@ -272,7 +272,7 @@ def test_angular_velocity_map_matches_inhouse_velocities(name):
 def test_the_greedy_tree_is_the_exhaustive_choice(scenario, cost, monkeypatch):
     """Where both run, Kruskal's tree (forced with EXHAUSTIVE_LIMIT = 0) cuts the same joints as
     the enumeration of every spanning tree."""
-    import harness.model.topology as topology
+    import mbh._harness.model.topology as topology
 
     mech = load(scenario)
     if cost is planar_closure and not mech.planar:

@@ -1,4 +1,4 @@
-"""The neutral assembly and rank analysis (harness.neutral.assembly, harness.neutral.mobility) and `mbh check`."""
+"""The neutral assembly and rank analysis (mbh._harness.neutral.assembly, mbh._harness.neutral.mobility) and `mbh check`."""
 
 from __future__ import annotations
 
@@ -9,17 +9,17 @@ import numpy as np
 import pytest
 from tests.helpers import variant_text
 
-from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.kinematics import assemble as inhouse_assemble
-from adapters.inhouse.states import body_states
-from harness import cli
-from harness.model import scenario
-from harness.neutral.assembly import AssemblyError, SingularStartError, assemble
-from harness.neutral.start import initial_state
-from harness.neutral.equations import JointEquations
-from harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
-from harness.model.outputs import body_rotations, joint_angle
-from harness.neutral.mobility import CONDITION_LIMIT
+from mbh._adapters.inhouse.constraints import layout_of
+from mbh._adapters.inhouse.kinematics import assemble as inhouse_assemble
+from mbh._adapters.inhouse.states import body_states
+from mbh._harness import cli
+from mbh._harness.model import scenario
+from mbh._harness.neutral.assembly import AssemblyError, SingularStartError, assemble
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
+from mbh._harness.model.outputs import body_rotations, joint_angle
+from mbh._harness.neutral.mobility import CONDITION_LIMIT
 
 SHIPPED = scenario.scenario_names()
 
@@ -66,7 +66,7 @@ def test_the_start_satisfies_the_joints_and_the_driver(name):
                                                s.angular_velocity)).max() <= 1e-12
     driver = mech.joint(mech.initial.driver)
     angle = joint_angle(mech, driver, s.position, body_rotations(s.quaternion))
-    assert angle == pytest.approx(value, abs=1e-12)  # harness.model.outputs' own angle; measured 3.9e-16
+    assert angle == pytest.approx(value, abs=1e-12)  # mbh._harness.model.outputs' own angle; measured 3.9e-16
     assert assembly.condition < CONDITION_LIMIT and assembly.report.mobility == 1
 
 

@@ -1,4 +1,4 @@
-"""The neutral joint equations (harness.neutral.equations): against the in-house kernels (an
+"""The neutral joint equations (mbh._harness.neutral.equations): against the in-house kernels (an
 independent implementation), on hand-computed configurations, against finite differences, and
 through the metrics (an injected 1 mm gap is reported as 1 mm)."""
 
@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from adapters.inhouse.constraints import ConstraintSystem, layout_of
-from adapters.inhouse.kinematics import assemble as inhouse_assemble
-from adapters.inhouse.states import body_states, coordinates
-from harness.model import scenario
-from harness.neutral.equations import JointEquations
-from harness.measure.metrics import constraint_violations, violation_series
-from harness.references.build import reference_trajectory
-from harness.model.trajectory import BodyStates, Trajectory
+from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of
+from mbh._adapters.inhouse.kinematics import assemble as inhouse_assemble
+from mbh._adapters.inhouse.states import body_states, coordinates
+from mbh._harness.model import scenario
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.measure.metrics import constraint_violations, violation_series
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 SHIPPED = scenario.scenario_names()
 # Variants covering every joint type (spatial prismatic; the translational, prismatic and

@@ -2,8 +2,8 @@
 issue 14) compute what the numpy measuring stick computes, and the routes built on them reproduce
 the shipped references.
 
-Two levels: one state at a time against :mod:`harness.neutral.equations` and
-:mod:`harness.neutral.dynamics` (every scene, every joint and load type), and whole routes against
+Two levels: one state at a time against :mod:`mbh._harness.neutral.equations` and
+:mod:`mbh._harness.neutral.dynamics` (every scene, every joint and load type), and whole routes against
 the stored route A of ``scenarios/references`` (short spans here, the full runs marked slow).
 Bounds are relative to the quantity's size with a floor of 1 (m, rad, m/s², …): the two paths
 differ only in the order of floating-point operations, and no bound is below 1e-12 relative.
@@ -16,25 +16,25 @@ import dataclasses
 import numpy as np
 import pytest
 
-from harness.model import scenario
+from mbh._harness.model import scenario
 from scipy.spatial.transform import Rotation
 
-from harness.neutral.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble,
+from mbh._harness.neutral.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble,
                               newton_positions)
-from harness.references.routes import (FULL_ROUTE_BAUMGARTE, BranchEquations, full_route,
+from mbh._harness.references.routes import (FULL_ROUTE_BAUMGARTE, BranchEquations, full_route,
                                   reduced_route)
-from harness.neutral.equations import twist_vector
-from harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint,
+from mbh._harness.neutral.equations import twist_vector
+from mbh._harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint,
                            JointActuation, Mechanism)
-from harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
+from mbh._harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
                                       UNIQUENESS_RATIO, IndeterminateAccelerations, accelerations,
                                       gamma, twist_mass_and_forces)
-from harness.neutral.dynamics_kernels import (body_table, branch_pose, full_rates, mass_and_forces,
+from mbh._harness.neutral.dynamics_kernels import (body_table, branch_pose, full_rates, mass_and_forces,
                                      mass_spread)
-from harness.neutral.dynamics_kernels import gamma as compiled_gamma
-from harness.references.build import (AGREEMENT_LIMIT, reference_grid, reference_trajectory,
+from mbh._harness.neutral.dynamics_kernels import gamma as compiled_gamma
+from mbh._harness.references.build import (AGREEMENT_LIMIT, reference_grid, reference_trajectory,
                                route_difference)
-from harness.model.trajectory import BodyStates
+from mbh._harness.model.trajectory import BodyStates
 
 #: The scenes whose references are built by the neutral routes.
 NEUTRAL_SCENES = ("andrews", "bricard", "double_fourbar", "parallelogram_fourbar", "n_fourbar@4")
@@ -144,7 +144,7 @@ def test_every_load_type_is_compiled():
 @pytest.mark.parametrize("name", NEUTRAL_SCENES)
 def test_compiled_newton_is_the_assembly_newton(name):
     """The reduced route's pose at θ 0.01 rad (or m) past three reference samples, from the
-    sample: :func:`branch_pose` against :func:`harness.neutral.assembly.newton_positions` on the numpy
+    sample: :func:`branch_pose` against :func:`mbh._harness.neutral.assembly.newton_positions` on the numpy
     rows.  Measured worst 6.7e-16 (m, and quaternion components); bound 1e-12."""
     mech = scenario.load(name)
     start = assemble(mech).states

@@ -52,7 +52,7 @@ angle = { kind = "joint_angle", joint = "pivot" }
 
 def test_the_installed_package_is_not_the_checkout(installed):
     bin_folder, user, env = installed
-    done = run([bin_folder / "python", "-c", "import harness, mbh; print(harness.__file__)"],
+    done = run([bin_folder / "python", "-c", "import mbh._harness; print(mbh._harness.__file__)"],
                user, env)
     assert str(ROOT) not in done.stdout and "site-packages" in done.stdout
 

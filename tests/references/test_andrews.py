@@ -17,16 +17,16 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import harness
-from adapters import get_adapter
-from harness.model import scenario
-from harness.neutral.start import initial_state
-from harness.neutral.dynamics import accelerations
-from harness.model.outputs import output_series
-from harness.neutral.mobility import rank_analysis
-from harness.references.build import reference_grid, reference_trajectory
+import mbh._harness
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.neutral.dynamics import accelerations
+from mbh._harness.model.outputs import output_series
+from mbh._harness.neutral.mobility import rank_analysis
+from mbh._harness.references.build import reference_grid, reference_trajectory
 
-PUBLISHED = Path(harness.__file__).resolve().parent / "data" / "andrews_testset.toml"
+PUBLISHED = Path(mbh._harness.__file__).resolve().parent / "data" / "andrews_testset.toml"
 
 
 @pytest.fixture(scope="module")

@@ -13,17 +13,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from harness import cli
-from harness.model import scenario
-from harness.neutral.assembly import assemble
-from harness.run.case import simulate_case
-from harness.measure.energy import mechanical_energy, state_arrays
-from harness.neutral.equations import JointEquations
-from harness.model.outputs import output_series
-from harness.neutral.mobility import grubler_mobility
-from harness.references.build import reference_trajectory
-from harness.model.timegrid import reference_indices
+from mbh._adapters import get_adapter
+from mbh._harness import cli
+from mbh._harness.model import scenario
+from mbh._harness.neutral.assembly import assemble
+from mbh._harness.run.case import simulate_case
+from mbh._harness.measure.energy import mechanical_energy, state_arrays
+from mbh._harness.neutral.equations import JointEquations
+from mbh._harness.model.outputs import output_series
+from mbh._harness.neutral.mobility import grubler_mobility
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.model.timegrid import reference_indices
 
 JOINTS = "ABCDEF"
 ROW_NAMES = ("gap x", "gap y", "gap z", "tilt about normal", "tilt about binormal")

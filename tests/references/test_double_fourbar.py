@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 from tests.helpers import reduced_tip
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.model.outputs import output_series
-from harness.references.build import reference_grid
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_grid
 
 @pytest.fixture(scope="module")
 def mech():

@@ -6,7 +6,7 @@ Outside checks: for the parallelogram, its one-degree-of-freedom model on the pa
 V = g (2 · ½ + 1) sin φ, so (5/3) φ̈ = −2 g cos φ, φ(0) = π/3, φ̇(0) = 0); for the stiff four-bar,
 the eigenvalues of its reduced one-degree-of-freedom equation θ̈ = f(θ, θ̇) in the crank angle,
 linearised at the start by central differences of the neutral model's accelerations
-(:mod:`harness.neutral.dynamics`), with and without the spring.
+(:mod:`mbh._harness.neutral.dynamics`), with and without the spring.
 """
 
 from __future__ import annotations
@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.neutral.assembly import assemble
-from harness.run.case import run_case
-from harness.measure.energy import (coordinate_work, energy_balance, energy_scale, kinetic_energy,
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.neutral.assembly import assemble
+from mbh._harness.run.case import run_case
+from mbh._harness.measure.energy import (coordinate_work, energy_balance, energy_scale, kinetic_energy,
                             state_arrays)
-from harness.neutral.dynamics import accelerations
-from harness.model.outputs import output_series
-from harness.references.build import reference_grid, reference_trajectory
+from mbh._harness.neutral.dynamics import accelerations
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_grid, reference_trajectory
 
 GRAVITY = 9.81
 #: Largest step (s) on the 0.01 s / k ladder at which in-house rk4+direct stays stable on

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from scipy.special import ellipj, ellipk
 
-from harness.model import scenario
-from harness.model.outputs import output_series
-from harness.references.build import reference_trajectory
+from mbh._harness.model import scenario
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_trajectory
 
 LENGTH = 1.0
 GRAVITY = 9.81

@@ -1,4 +1,4 @@
-"""Synthetic campaign histories for the history tests: :class:`harness.report.history.History`
+"""Synthetic campaign histories for the history tests: :class:`mbh._harness.report.history.History`
 objects built in memory, with the noise measured on this machine.
 
 Calibrated-time noise: ``exp(σ · t₃ / √3)`` with σ = 0.036 (natural log, per run), the spread
@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from harness.report.history import History
+from mbh._harness.report.history import History
 
 #: Measured per-run noise of the log of calibrated time on the idle machine (see above).
 IDLE_TIME_NOISE = 0.036

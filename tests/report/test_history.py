@@ -16,12 +16,12 @@ import re
 import numpy as np
 import pytest
 
-from harness.report.changepoints import ERROR, TIME, detect_steps, noise_level
-from harness.report.history import (find_changes, load_history, open_regressions,
+from mbh._harness.report.changepoints import ERROR, TIME, detect_steps, noise_level
+from mbh._harness.report.history import (find_changes, load_history, open_regressions,
                                     version_changes)
-from harness.report.history_page import build_history
-from harness.report.history_figures import method_family
-from harness.store.runs import RunStore
+from mbh._harness.report.history_page import build_history
+from mbh._harness.report.history_figures import method_family
+from mbh._harness.store.runs import RunStore
 from tests.helpers import run_mbh
 from tests.report.history_cases import case, history
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import json
 import re
 
-from harness.report.history import find_changes
-from harness.report.history_page import build_history
+from mbh._harness.report.history import find_changes
+from mbh._harness.report.history_page import build_history
 from tests.report.history_cases import case, history
 from tests.report.browser import LAPTOP, _chromium, _console, _page_requests, needs_chromium
 

@@ -17,8 +17,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from harness.report import build
-from harness.store.runs import RunStore, latest_run
+from mbh._harness.report import build
+from mbh._harness.store.runs import RunStore, latest_run
 from tests.helpers import MBH, run_mbh, seed_rows
 
 #: Markup in a scenario name and in a method parameter (the escaping test's run).
@@ -85,7 +85,7 @@ def test_html_holds_every_section_in_order_and_every_figure(built, run_store):
 
 
 def test_summary_picks_the_fastest_ok_case_per_level(run_store):
-    from harness.report.summary import ACCURACY_LEVELS, fastest_table
+    from mbh._harness.report.summary import ACCURACY_LEVELS, fastest_table
 
     cases = run_store.cases()
     table = fastest_table(cases, "fourbar", run_store.calibration_s)
@@ -215,7 +215,7 @@ def test_changes_against_a_previous_run(run_store, small_run, tmp_path):
 
 
 def test_seed_comparison_sets_ours_beside_theirs(run_store, built):
-    from harness.report import seed_compare
+    from mbh._harness.report import seed_compare
 
     published = seed_compare.load_published()
     table = seed_compare.comparison_table(published, seed_rows())
@@ -232,7 +232,7 @@ def test_seed_comparison_sets_ours_beside_theirs(run_store, built):
 
 
 def test_missing_or_bad_seed_table_is_said(run_store, tmp_path):
-    from harness.report import seed_compare
+    from mbh._harness.report import seed_compare
 
     assert seed_compare.load_ours(tmp_path) is None
     (tmp_path / "seed_table.json").write_text('{"not": "rows"}', encoding="utf-8")

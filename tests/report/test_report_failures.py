@@ -14,14 +14,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.run.spec import CaseSpec
-from harness.run.row import error_row
-from harness.model.outputs import output_series
-from harness.references.build import reference_trajectory
-from harness.report import build, failures
-from harness.store.runs import RunStore
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.run.spec import CaseSpec
+from mbh._harness.run.row import error_row
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.report import build, failures
+from mbh._harness.store.runs import RunStore
 
 SCENE = "double_fourbar"
 T_END = 2.0
@@ -203,8 +203,8 @@ def test_the_report_knows_what_each_inhouse_alias_resolves_to(alias):
 
 
 def test_hard_campaign_covers_every_hard_scene():
-    from adapters import adapter_names
-    from harness.run.spec import load_campaign
+    from mbh._adapters import adapter_names
+    from mbh._harness.run.spec import load_campaign
 
     hard = load_campaign("hard")
     scenes = {name for name in scenario.scenario_names()

@@ -1,4 +1,4 @@
-"""Report figures (harness.report.figures, harness.report.mechanism, harness.report.style): valid,
+"""Report figures (mbh._harness.report.figures, mbh._harness.report.mechanism, mbh._harness.report.style): valid,
 deterministic SVG and PDF from synthetic case rows and from a real short run; every case drawn,
 failed ones included; names shown escaped; the drawings geometrically right."""
 
@@ -13,16 +13,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.neutral.mobility import rank_analysis
-from harness.references.build import reference_trajectory
-from harness.report.figures import (jacobian_condition, pareto_front, stability_map,
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.neutral.mobility import rank_analysis
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.report.figures import (jacobian_condition, pareto_front, stability_map,
                                     time_history, work_precision)
-from harness.report.mechanism import (REFERENCE_KEY, mechanism_animation,
+from mbh._harness.report.mechanism import (REFERENCE_KEY, mechanism_animation,
                                       mechanism_snapshots)
-from harness.report.style import Figure, outcome
-from harness.model.timegrid import sample_times
+from mbh._harness.report.style import Figure, outcome
+from mbh._harness.model.timegrid import sample_times
 
 SVG = "{http://www.w3.org/2000/svg}"
 MARKUP = "<b>x</b>"

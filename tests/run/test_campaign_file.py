@@ -7,11 +7,11 @@ import math
 
 import pytest
 
-from adapters import adapter_names
-from harness.run import spec as campaign
-from harness.model import scenario
-from harness.run.spec import CampaignError, CaseSpec, load_campaign, main_output
-from harness.measure.verdict import Bounds
+from mbh._adapters import adapter_names
+from mbh._harness.run import spec as campaign
+from mbh._harness.model import scenario
+from mbh._harness.run.spec import CampaignError, CaseSpec, load_campaign, main_output
+from mbh._harness.measure.verdict import Bounds
 
 #: A file with one mistake per line that matters; each (field, words of the message) must be named.
 BAD = """

@@ -5,7 +5,7 @@ import shutil
 
 import pytest
 
-from harness.run.spec import CampaignError, load_campaign
+from mbh._harness.run.spec import CampaignError, load_campaign
 from tests.helpers import ROOT
 
 

@@ -8,13 +8,13 @@ import math
 
 import pytest
 
-from adapters import get_adapter
-from harness.run import row as case_row
-from harness.model import scenario
-from harness.run.spec import CaseSpec
-from harness.run.row import error_row, run_spec
-from harness.references.build import ReferenceBuildError
-from harness.measure.verdict import DEFAULT_BOUNDS
+from mbh._adapters import get_adapter
+from mbh._harness.run import row as case_row
+from mbh._harness.model import scenario
+from mbh._harness.run.spec import CaseSpec
+from mbh._harness.run.row import error_row, run_spec
+from mbh._harness.references.build import ReferenceBuildError
+from mbh._harness.measure.verdict import DEFAULT_BOUNDS
 
 #: Columns every row carries (the interface of issue 10), besides error_/final_<output>.
 REQUIRED = {

@@ -1,4 +1,4 @@
-"""The executor (harness.run.executor): one process per case, warm (forked from the template) or
+"""The executor (mbh._harness.run.executor): one process per case, warm (forked from the template) or
 cold (a fresh interpreter); a hang, a kill, a segfault or an exception in a case becomes that
 case's row, the other cases still run, an interrupt kills the running workers, and workers die
 with a campaign process killed by SIGKILL.  Driven by a toy work function (defined here, run in the
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from harness.run.executor import WORKER_ENV, execute
+from mbh._harness.run.executor import WORKER_ENV, execute
 
 
 @dataclass(frozen=True)
@@ -119,7 +119,7 @@ def test_a_warm_worker_runs_in_the_callers_folder_and_environment_of_now(tmp_pat
 
 CAMPAIGN_PROCESS = """
 import sys
-from harness.run.executor import execute
+from mbh._harness.run.executor import execute
 from tests.run.test_execute import ToySpec, toy_failure_row, toy_work
 execute([ToySpec("sleep", timeout_s=600.0, pid_file=sys.argv[1])], toy_work, workers=1,
         failure_row=toy_failure_row, progress=False, on_result=print, warm=sys.argv[2] == "warm")

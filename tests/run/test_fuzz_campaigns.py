@@ -1,4 +1,4 @@
-"""Bad campaign files, tried by the thousand (issue 31 item 5): :func:`harness.run.spec.load_campaign`.
+"""Bad campaign files, tried by the thousand (issue 31 item 5): :func:`mbh._harness.run.spec.load_campaign`.
 
 Every example is a shipped campaign mutated by Hypothesis — wrong types, NaN and ±inf, integers
 beyond the double range, unknown scenarios, family members out of range, unknown adapters,
@@ -22,9 +22,9 @@ import pytest
 from hypothesis import event, example, given, settings
 from hypothesis import strategies as st
 
-from adapters import adapter_names
-from harness.model.scenario import scenario_names
-from harness.run.spec import Campaign, CampaignError, campaign_names, campaign_path, load_campaign
+from mbh._adapters import adapter_names
+from mbh._harness.model.scenario import scenario_names
+from mbh._harness.run.spec import Campaign, CampaignError, campaign_names, campaign_path, load_campaign
 from tests.fuzzing import BASE, BREAKS, HUGE, NAMES, NUMBERS, VALUES, fuzzed_file, toml_document
 
 DEFAULT_EXAMPLES = 200

@@ -1,4 +1,4 @@
-"""Campaign runs end to end (harness.run.campaign, harness.run.sweep, ``mbh run/runs/show/compare``):
+"""Campaign runs end to end (mbh._harness.run.campaign, mbh._harness.run.sweep, ``mbh run/runs/show/compare``):
 the same rows through the process pool and a Dask LocalCluster, and from warm and cold workers,
 failures as rows, Ctrl-C and resume, a diverging method, a bad campaign file refused before
 anything runs, the stability sweep's bisection."""
@@ -20,17 +20,17 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from adapters import adapter_names
-from harness.common import environment
-from harness.run.spec import load_campaign
-from harness.run.campaign import run_campaign
-from harness.run.row import CaseWork
-from harness.model.timegrid import EVALUATION_STEP
-from harness.store.runs import RunStore, list_runs
-from harness.run.sweep import Bisection, stability_sweep
-from harness.measure.verdict import Bounds
+from mbh._adapters import adapter_names
+from mbh._harness.common import environment
+from mbh._harness.run.spec import load_campaign
+from mbh._harness.run.campaign import run_campaign
+from mbh._harness.run.row import CaseWork
+from mbh._harness.model.timegrid import EVALUATION_STEP
+from mbh._harness.store.runs import RunStore, list_runs
+from mbh._harness.run.sweep import Bisection, stability_sweep
+from mbh._harness.measure.verdict import Bounds
 
-MBH = [sys.executable, "-m", "harness.cli"]
+MBH = [sys.executable, "-m", "mbh._harness.cli"]
 
 #: Row columns that hold wall-clock times (they differ between any two runs) or where the run
 #: stored the case.
@@ -166,8 +166,8 @@ def test_smoke_campaign_gives_the_same_rows_through_pool_and_dask(results):
 #: each into its own results root; prints both run ids.
 WARM_AND_COLD = """
 import sys
-from harness.run.campaign import run_campaign
-from harness.run.spec import load_campaign
+from mbh._harness.run.campaign import run_campaign
+from mbh._harness.run.spec import load_campaign
 
 campaign = load_campaign(sys.argv[1])
 warm = run_campaign(campaign, workers=2, root=sys.argv[2], quiet=True)

@@ -22,11 +22,11 @@ import pandas as pd
 import psutil
 import pytest
 
-from harness.run.executor import _dask_case, _end_dask_execution, execute
-from harness.run.spec import load_campaign
-from harness.store.runs import list_runs
+from mbh._harness.run.executor import _dask_case, _end_dask_execution, execute
+from mbh._harness.run.spec import load_campaign
+from mbh._harness.store.runs import list_runs
 
-MBH = [sys.executable, "-m", "harness.cli"]
+MBH = [sys.executable, "-m", "mbh._harness.cli"]
 
 #: 18 cases of 4 s at small steps (0.2–2 s each on one core): with two workers the cases take
 #: about three quarters of a run (the warm template's start the rest), so drawn moments fall

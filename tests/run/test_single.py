@@ -1,12 +1,12 @@
-"""One case from Python (harness.run.single.run_one, mbh.run_case): arguments checked up front
+"""One case from Python (mbh._harness.run.single.run_one, mbh.run_case): arguments checked up front
 with every problem named, a built mechanism runs like a file, the row is a stored run's row."""
 
 import pytest
 
-from harness.model import scenario
-from harness.model.builder import MechanismBuilder
-from harness.run.single import CaseInputError, run_one
-from harness.store.schema import CASE_COLUMNS
+from mbh._harness.model import scenario
+from mbh._harness.model.builder import MechanismBuilder
+from mbh._harness.run.single import CaseInputError, run_one
+from mbh._harness.store.schema import CASE_COLUMNS
 
 
 def test_every_bad_argument_is_named_at_once():

@@ -1,4 +1,4 @@
-"""The warm template (harness.run.warm) keeps the scenarios it was told to read and their
+"""The warm template (mbh._harness.run.warm) keeps the scenarios it was told to read and their
 references, and imports no pandas (that its cases store the rows of fresh interpreters:
 tests/run/test_runner.py)."""
 
@@ -9,21 +9,21 @@ import os
 import subprocess
 import sys
 
-from harness.run.executor import WARM_SCENARIOS_ENV
+from mbh._harness.run.executor import WARM_SCENARIOS_ENV
 
 
 def test_the_template_keeps_the_scenarios_it_was_told_to_read_and_their_references():
     script = """
 import sys
-from harness.model import scenario
-from harness.references.build import reference_trajectory
-import harness.run.warm
-import harness.run.calibration, harness.run.row  # what a case unpickles: its work and spec
+from mbh._harness.model import scenario
+from mbh._harness.references.build import reference_trajectory
+import mbh._harness.run.warm
+import mbh._harness.run.calibration, mbh._harness.run.row  # what a case unpickles: its work and spec
 
 told, other = scenario.load("fourbar"), scenario.load("slider_crank")
 print(told is scenario.load("fourbar"), other is scenario.load("slider_crank"),
       reference_trajectory(told) is reference_trajectory(told),
-      reference_trajectory(told).position.flags.writeable, harness.run.warm.MISSED,
+      reference_trajectory(told).position.flags.writeable, mbh._harness.run.warm.MISSED,
       "pandas" in sys.modules)
 """
     env = os.environ | {WARM_SCENARIOS_ENV: json.dumps(["fourbar"])}

@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import json
 
-from harness import cli
-from harness.run import warm_up
+from mbh._harness import cli
+from mbh._harness.run import warm_up
 
 
 def test_every_case_runs_once_and_a_failure_is_a_row(monkeypatch, capsys):

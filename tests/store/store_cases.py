@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 
 
 #: A small campaign ``mbh run`` can run (three fourbar cases of 0.2 s), for the store's end-to-end
@@ -26,7 +26,7 @@ dts = [1e-2, 5e-3, 2e-3]
 
 @dataclass(frozen=True)
 class Spec:
-    """The CaseSpec attributes the store reads (harness.run.spec.CaseSpec has more)."""
+    """The CaseSpec attributes the store reads (mbh._harness.run.spec.CaseSpec has more)."""
 
     scenario: str
     adapter: str

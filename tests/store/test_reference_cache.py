@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.model import scenario
-from harness.model.timegrid import GRID_STEP
-from harness.references.build import load_or_build, routes
-from harness.store.reference_files import (ARRAYS, REFERENCE_VERSION, read_reference,
+from mbh._harness.model import scenario
+from mbh._harness.model.timegrid import GRID_STEP
+from mbh._harness.references.build import load_or_build, routes
+from mbh._harness.store.reference_files import (ARRAYS, REFERENCE_VERSION, read_reference,
                                            reference_paths, stale_reason, stored_reference)
 
 SHIPPED = ("fourbar", "fourbar_spatial", "slider_crank", "slider_crank_planar")
@@ -37,9 +37,9 @@ def _build_in_child(path: str, cache: str) -> str:
     import os
 
     os.environ["MBH_CACHE_DIR"] = cache
-    from harness.model import scenario as child_scenario
-    from harness.references.build import load_or_build as child_load
-    from harness.store.reference_files import reference_paths as child_paths
+    from mbh._harness.model import scenario as child_scenario
+    from mbh._harness.references.build import load_or_build as child_load
+    from mbh._harness.store.reference_files import reference_paths as child_paths
 
     mech = child_scenario.load(path)
     trajectory, _ = child_load(mech)
@@ -113,7 +113,7 @@ def test_arrays_off_the_grid_or_a_broken_file_rebuild(tiny):
 
 
 def _read_cache_unchecked(data_path: Path):
-    from harness.model.trajectory import Trajectory
+    from mbh._harness.model.trajectory import Trajectory
 
     with np.load(data_path) as data:
         return Trajectory(**{key: data[key] for key in ARRAYS})

@@ -7,11 +7,11 @@ import json
 
 import pytest
 
-from harness.common.locations import shipped
-from harness.common.progress import StageProgress
-from harness.model import scenario
-from harness.references.build import build_reference
-from harness.store.reference_files import cache_dir, reference_paths, search_dirs
+from mbh._harness.common.locations import shipped
+from mbh._harness.common.progress import StageProgress
+from mbh._harness.model import scenario
+from mbh._harness.references.build import build_reference
+from mbh._harness.store.reference_files import cache_dir, reference_paths, search_dirs
 from tests.helpers import run_mbh
 
 #: A four-bar of 20 ms: its reference builds in ~2 s (measured).

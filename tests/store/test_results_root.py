@@ -23,11 +23,11 @@ from pathlib import Path
 
 import pytest
 
-from harness import cli
-from harness.run.campaign import run_campaign
-from harness.run.spec import load_campaign
-from harness.store import runs
-from harness.store.runs import RunStore, StoreError
+from mbh._harness import cli
+from mbh._harness.run.campaign import run_campaign
+from mbh._harness.run.spec import load_campaign
+from mbh._harness.store import runs
+from mbh._harness.store.runs import RunStore, StoreError
 from tests.store.store_cases import RUNNABLE_CAMPAIGN, SPECS, campaign, row_for, trajectory
 
 CAMPAIGN = RUNNABLE_CAMPAIGN

@@ -1,4 +1,4 @@
-"""The result store (harness.store.runs): rows, parts, resume, cache, migration, listing, comparison.
+"""The result store (mbh._harness.store.runs): rows, parts, resume, cache, migration, listing, comparison.
 
 The committed fixture ``tests/data/store_v1/`` is a run written by :func:`write_v1_store` below,
 the schema-1 writer kept only here.  Regenerate it with
@@ -21,12 +21,12 @@ import pyarrow.parquet as pq
 import pytest
 
 import mbh
-from harness.common import environment
-from harness.store import compare as run_compare
-from harness.store import runs as store
-from harness.run.spec import load_campaign
-from harness.store.schema import SCHEMA_VERSION, SchemaError
-from harness.model.trajectory import Trajectory
+from mbh._harness.common import environment
+from mbh._harness.store import compare as run_compare
+from mbh._harness.store import runs as store
+from mbh._harness.run.spec import load_campaign
+from mbh._harness.store.schema import SCHEMA_VERSION, SchemaError
+from mbh._harness.model.trajectory import Trajectory
 from tests.helpers import DATA
 from tests.store.store_cases import SPECS, campaign, row_for, trajectory
 
@@ -329,7 +329,7 @@ def test_a_cached_row_stored_again_carries_the_new_run_id(root):
 # --- schema migration -----------------------------------------------------------------------
 
 def write_v1_store(root: Path) -> None:
-    """Write the schema-1 run :data:`V1_RUN` under ``root`` (see harness.store.schema).
+    """Write the schema-1 run :data:`V1_RUN` under ``root`` (see mbh._harness.store.schema).
 
     Schema 1: rows with ``wall_time`` (no ``wall_time_s``, no per-step or per-simulated-second
     time), part files without a version in their metadata, a manifest without

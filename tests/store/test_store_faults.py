@@ -21,12 +21,12 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from harness import cli
-from harness.run.row import run_spec
-from harness.run.spec import CaseSpec, load_campaign
-from harness.run.sweep import bisections, stability_sweep
-from harness.store import runs
-from harness.store.runs import MissingTrajectory, RunStore, StoreError, StoreWarning
+from mbh._harness import cli
+from mbh._harness.run.row import run_spec
+from mbh._harness.run.spec import CaseSpec, load_campaign
+from mbh._harness.run.sweep import bisections, stability_sweep
+from mbh._harness.store import runs
+from mbh._harness.store.runs import MissingTrajectory, RunStore, StoreError, StoreWarning
 from tests.store.store_cases import RUNNABLE_CAMPAIGN
 
 CAMPAIGN = RUNNABLE_CAMPAIGN + """[sweep]
@@ -225,7 +225,7 @@ def test_the_report_of_a_damaged_run_is_built_and_says_what_is_left_out(run, tmp
 # --- resume -----------------------------------------------------------------------------------
 
 def test_resume_sets_a_damaged_part_aside_and_runs_its_case_again(run):
-    """What ``--resume`` does with the store (harness.run.campaign: open, lock, skip the done
+    """What ``--resume`` does with the store (mbh._harness.run.campaign: open, lock, skip the done
     cases, store the rest, finish)."""
     path, root, run_id = run
     intact = case_ids(root, run_id)

@@ -1,4 +1,4 @@
-"""Bad tolerance files, tried by the thousand (issue 31 item 5): :class:`harness.testing.tolerances.Tolerances`.
+"""Bad tolerance files, tried by the thousand (issue 31 item 5): :class:`mbh._harness.testing.tolerances.Tolerances`.
 
 Every example is the project's own tolerance file (tests/acceptance/tolerances.toml) or the
 documented example, mutated by Hypothesis — wrong types, NaN and ±inf, negative and subnormal
@@ -21,9 +21,9 @@ import pytest
 from hypothesis import event, example, given, settings
 from hypothesis import strategies as st
 
-from harness.run.spec import CaseSpec
-from harness.testing.cases import ToleranceError
-from harness.testing.tolerances import CaseTolerance, Tolerances
+from mbh._harness.run.spec import CaseSpec
+from mbh._harness.testing.cases import ToleranceError
+from mbh._harness.testing.tolerances import CaseTolerance, Tolerances
 from tests.helpers import ROOT
 from tests.fuzzing import BASE, BREAKS, HUGE, NAMES, NUMBERS, VALUES, fuzzed_file, toml_document
 

@@ -16,11 +16,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from harness.run.case import CaseResult
-from harness.testing.cases import CaseRunner, SessionCase, ToleranceError, case_label, case_spec
-from harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
+from mbh._harness.run.case import CaseResult
+from mbh._harness.testing.cases import CaseRunner, SessionCase, ToleranceError, case_label, case_spec
+from mbh._harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
                                 constraint_violation_series)
-from harness.model.trajectory import Trajectory
+from mbh._harness.model.trajectory import Trajectory
 from tests.helpers import example_suite_files
 
 def run_pytest(folder: Path, *args: str) -> subprocess.CompletedProcess:
@@ -59,7 +59,7 @@ def test_selection_options_skip_other_cases_with_the_reason(tmp_path):
 
 
 USER_TESTS = '''
-from harness.testing.tolerances import assert_close_to_reference, assert_constraint_violation_below
+from mbh._harness.testing.tolerances import assert_close_to_reference, assert_constraint_violation_below
 
 
 def test_sensible_tolerance(mbh_runner):
@@ -191,7 +191,7 @@ def test_a_case_without_an_entry_is_an_error(tmp_path):
 
 
 def test_selection_names_unknown_scenarios_and_adapters():
-    from harness.testing.cases import Selection
+    from mbh._harness.testing.cases import Selection
 
     with pytest.raises(ToleranceError, match=r"--mbh-adapters: unknown mujocco \(known: .*mujoco"):
         Selection.parse("fourbar", "mujocco")

@@ -4,8 +4,8 @@ Every tolerance below was measured on this machine (exudyn 1.13.6) with margin; 
 sits next to it.  Reproduce the numbers with ``.venv/bin/python -m pytest
 tests/adapters/exudyn/test_exudyn_adapter.py -m "slow or not slow" -v``.
 
-Constraint violations and energies are computed by the harness (``harness.measure.metrics``,
-``harness.measure.energy``) from the body states the adapter returns (docs/design.md, rule 2), never from
+Constraint violations and energies are computed by the harness (``mbh._harness.measure.metrics``,
+``mbh._harness.measure.energy``) from the body states the adapter returns (docs/design.md, rule 2), never from
 Exudyn's residuals.
 """
 
@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from tests.helpers import VERIFIED_SCENES
 
-from adapters.base import RunFailure, UnsupportedCase
-from adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
-from harness.neutral.start import initial_state
-from harness.measure.energy import energy_balance
-from harness.measure.metrics import case_metrics
-from harness.model.mechanism import (
+from mbh._adapters.base import RunFailure, UnsupportedCase
+from mbh._adapters.exudyn_adapter import ExudynAdapter, ExudynModel, ExudynSystem
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.measure.energy import energy_balance
+from mbh._harness.measure.metrics import case_metrics
+from mbh._harness.model.mechanism import (
     GROUND,
     Body,
     BodyForce,
@@ -32,10 +32,10 @@ from harness.model.mechanism import (
     Mechanism,
     SpringDamper,
 )
-from harness.neutral.dynamics import IndeterminateAccelerations, accelerations
-from harness.model.outputs import output_series
-from harness.model.scenario import load, scenario_names
-from harness.model.trajectory import Trajectory
+from mbh._harness.neutral.dynamics import IndeterminateAccelerations, accelerations
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.scenario import load, scenario_names
+from mbh._harness.model.trajectory import Trajectory
 from tests.helpers import ACCELERATION_TOLERANCE, measured_acceleration_gap
 
 

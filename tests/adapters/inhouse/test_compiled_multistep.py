@@ -18,12 +18,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from adapters.inhouse.compiled_multistep import lu_factor_into, lu_solve_into
-from harness.model import scenario
-from harness.model.timegrid import sample_times
-from harness.references.build import reference_trajectory
-from harness.run.case import run_case
+from mbh._adapters import get_adapter
+from mbh._adapters.inhouse.compiled_multistep import lu_factor_into, lu_solve_into
+from mbh._harness.model import scenario
+from mbh._harness.model.timegrid import sample_times
+from mbh._harness.references.build import reference_trajectory
+from mbh._harness.run.case import run_case
 
 #: Largest difference of the two paths' positions (m, rad) and velocities (module docstring).
 NEWTON_PATH_BOUND = 1e-7

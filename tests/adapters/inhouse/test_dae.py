@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from adapters.inhouse.constraints import ConstraintSystem
-from adapters.inhouse import kernels
-from adapters.inhouse.dae import DaeModel, IdaIntegration, IdaResult, ida_params, simulate_ida
-from adapters.inhouse.dynamics import Dynamics, mass_and_forces_kernel, solve_augmented
-from adapters.inhouse.kinematics import assemble
-from harness.model import scenario
+from mbh._adapters.inhouse.constraints import ConstraintSystem
+from mbh._adapters.inhouse import kernels
+from mbh._adapters.inhouse.dae import DaeModel, IdaIntegration, IdaResult, ida_params, simulate_ida
+from mbh._adapters.inhouse.dynamics import Dynamics, mass_and_forces_kernel, solve_augmented
+from mbh._adapters.inhouse.kinematics import assemble
+from mbh._harness.model import scenario
 
 T_END = 4.0
 SAMPLES = np.linspace(0.0, T_END, 401)

@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 from tests.helpers import VERIFIED_SCENES
 
-from adapters import get_adapter
-from harness.model import scenario
-from harness.measure.energy import energy_balance
-from harness.measure.metrics import case_metrics
-from harness.model.outputs import output_series
-from harness.references.build import AGREEMENT_LIMIT, ROUTE_B, reference_trajectory, route_difference
-from harness.model.timegrid import sample_times
-from harness.model.trajectory import Trajectory
+from mbh._adapters import get_adapter
+from mbh._harness.model import scenario
+from mbh._harness.measure.energy import energy_balance
+from mbh._harness.measure.metrics import case_metrics
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import AGREEMENT_LIMIT, ROUTE_B, reference_trajectory, route_difference
+from mbh._harness.model.timegrid import sample_times
+from mbh._harness.model.trajectory import Trajectory
 
 INHOUSE = get_adapter("inhouse")
 
@@ -170,10 +170,10 @@ def test_unknown_method_lists_the_valid_ones():
 def test_newton_euler_form_matches_the_euler_parameter_form(name):
     """At a moving state, the Newton–Euler accelerations (Rouvinen 2003, §3.3) mapped back to θ̈ equal the
     Euler-parameter form's q̈ (measured agreement 2e-14 on |q̈| ~ 8)."""
-    from adapters.inhouse.dynamics import g_bar
-    from adapters.inhouse.kinematics import assemble
-    from adapters.inhouse.newton_euler import NewtonEuler
-    from adapters.inhouse.stabilisation import NoStabilisation
+    from mbh._adapters.inhouse.dynamics import g_bar
+    from mbh._adapters.inhouse.kinematics import assemble
+    from mbh._adapters.inhouse.newton_euler import NewtonEuler
+    from mbh._adapters.inhouse.stabilisation import NoStabilisation
 
     mech = scenario.load(name)
     assembly = assemble(mech, value=0.3, rate=2.0)
@@ -200,7 +200,7 @@ def test_newton_euler_refuses_what_it_cannot_run():
 def test_shipped_reference_matches_a_fresh_build():
     """Rebuilding the four-bar reference from scratch reproduces the shipped file: catches a
     formulation change made without bumping REFERENCE_VERSION (about a minute)."""
-    from harness.references.build import build_reference
+    from mbh._harness.references.build import build_reference
 
     mech = scenario.load("fourbar")
     fresh, info = build_reference(mech)
@@ -248,7 +248,7 @@ def test_every_stabilisation_strategy_reaches_its_measured_accuracy(strategy):
 def test_geometric_elimination_energy_balance_on_the_independent_stick():
     """The strategy drives its own Ψ = T + V − W − E₀ (Rouvinen 2003, eq. 128, from the in-house mass matrix
     and the Hermite-rule work of the generalised load power) to zero; the harness's stick
-    (:func:`harness.measure.energy.energy_balance`, exact work τΔθ from body states) judges the result.
+    (:func:`mbh._harness.measure.energy.energy_balance`, exact work τΔθ from body states) judges the result.
     Measured on the spatial four-bar, rk4, 1 s: 1.80e-4 J at dt 2e-3 and 1.22e-5 J at dt 1e-3
     (ratio 14.7, the fourth order of the method), against 5.06e-5 J for Baumgarte and 2.65e-5 J
     for direct at dt 1e-3.  The old strategy's 1.8e-12 J was measured with the functions it

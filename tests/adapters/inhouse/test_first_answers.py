@@ -13,10 +13,10 @@ from __future__ import annotations
 
 import pytest
 
-from adapters import get_adapter
-from adapters.inhouse import generated_store
-from harness.measure.metrics import constraint_violations
-from harness.model.timegrid import sample_times
+from mbh._adapters import get_adapter
+from mbh._adapters.inhouse import generated_store
+from mbh._harness.measure.metrics import constraint_violations
+from mbh._harness.model.timegrid import sample_times
 from tests.helpers import bennett_linkage, parallel_revolute_fourbar, spring_damper_tree
 
 MECHANISMS = {"fourbar_4r": parallel_revolute_fourbar, "bennett": bennett_linkage,
@@ -52,7 +52,7 @@ def test_a_new_mechanisms_best_run_is_served_or_says_why(name, tmp_path, monkeyp
 def test_the_drawn_mechanisms_are_what_their_descriptions_say():
     """Rank, mobility and redundant equations of the drawn mechanisms (the in-house rank
     analysis at the assembled start): Bennett's loop has mobility 1 with Grübler's count −2."""
-    from adapters.inhouse.kinematics import check
+    from mbh._adapters.inhouse.kinematics import check
 
     found = {name: check(make()) for name, make in MECHANISMS.items()}
     summary = {name: (row["mobility"], row["grubler_mobility"], row["redundant_equations"])

@@ -1,4 +1,4 @@
-"""Placed passages of singular positions (:mod:`adapters.inhouse.fold`): the plan's arithmetic
+"""Placed passages of singular positions (:mod:`mbh._adapters.inhouse.fold`): the plan's arithmetic
 on made-up indicator histories, and its effect on ``double_fourbar``'s ten passages."""
 
 from __future__ import annotations
@@ -8,13 +8,13 @@ import pytest
 from tests.helpers import reduced_tip
 from tests.helpers import PATH_BOUND
 
-from adapters import get_adapter
-from adapters.inhouse.fold import (SAFE_INDICATOR, passage_placement, passage_times,
+from mbh._adapters import get_adapter
+from mbh._adapters.inhouse.fold import (SAFE_INDICATOR, passage_placement, passage_times,
                                    plan_passage)
-from adapters.integrators import integrator_class
-from harness.model import scenario
-from harness.model.outputs import output_series
-from harness.model.timegrid import sample_times
+from mbh._adapters.integrators import integrator_class
+from mbh._harness.model import scenario
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.timegrid import sample_times
 
 RK4 = passage_placement(integrator_class("rk4").tableau.c)
 

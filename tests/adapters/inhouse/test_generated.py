@@ -20,15 +20,15 @@ from hypothesis import HealthCheck, event, given, reject, settings
 from hypothesis import strategies as st
 from numba import cfunc, njit
 
-from adapters import get_adapter
-from adapters.base import RunFailure, RunGrid
-from adapters.inhouse import (compiled_stepper, dynamics, generated, generated_store,
+from mbh._adapters import get_adapter
+from mbh._adapters.base import RunFailure, RunGrid
+from mbh._adapters.inhouse import (compiled_stepper, dynamics, generated, generated_store,
                               on_demand, tracing)
-from adapters.inhouse.compiled_stepper import hand_back_note, step_end_note
-from harness.model import scenario
-from harness.neutral.assembly import AssemblyError
-from harness.testing.strategies import aligned_mechanisms, mechanisms
-from harness.model.timegrid import sample_times
+from mbh._adapters.inhouse.compiled_stepper import hand_back_note, step_end_note
+from mbh._harness.model import scenario
+from mbh._harness.neutral.assembly import AssemblyError
+from mbh._harness.testing.strategies import aligned_mechanisms, mechanisms
+from mbh._harness.model.timegrid import sample_times
 from tests.helpers import LARGE_TRACES, PATH_BOUND, parallel_revolute_fourbar
 
 RELATIVE_BOUND = 1e-13
@@ -423,7 +423,7 @@ def _check_generated_serves(mech):
           suppress_health_check=list(HealthCheck))
 @given(mech=aligned_mechanisms())
 def test_generated_loops_serve_starts_of_exact_zeros_and_symmetry(mech):
-    """A few chains of harness.testing.strategies.aligned_mechanisms (identity orientations, axes
+    """A few chains of mbh._harness.testing.strategies.aligned_mechanisms (identity orientations, axes
     and springs along coordinate axes): measured, their guards hand back no call."""
     try:
         _check_generated_serves(mech)

@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adapters.inhouse import generated_store
+from mbh._adapters.inhouse import generated_store
 
 #: A generated module as adapters/inhouse/generated.py writes one, compiled in ~1 s.
 SOURCE = ("import numpy as np\nfrom numba import cfunc\n\n"
-          "from adapters.inhouse.generated import SIGNATURE\n\n\n"
+          "from mbh._adapters.inhouse.generated import SIGNATURE\n\n\n"
           "@cfunc(SIGNATURE, cache=True)\n"
           "def acceleration(q, v, t, out):\n    out[0] = 2.0 * q[0] + v[0] + t\n    return 1\n")
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from adapters.inhouse.constraints import ConstraintSystem, layout_of
-from adapters.inhouse.kinematics import InhouseAssemblyError, assemble, check, rank_report
-from harness.model import scenario
+from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of
+from mbh._adapters.inhouse.kinematics import InhouseAssemblyError, assemble, check, rank_report
+from mbh._harness.model import scenario
 
 SHIPPED = scenario.scenario_names()
 

@@ -1,9 +1,9 @@
 """The in-house solves at singular positions (issue "Hard scenes" item 1) and the failure labels.
 
-The rank-revealing pieces: :func:`adapters.inhouse.linalg.truncated_solve`, the range-space
-acceleration :func:`adapters.inhouse.dynamics.range_space_acceleration`, the truncated projection
-of :class:`adapters.inhouse.stabilisation.DirectCorrection`; and
-:func:`harness.neutral.conditioning.label_failure`.
+The rank-revealing pieces: :func:`mbh._adapters.inhouse.linalg.truncated_solve`, the range-space
+acceleration :func:`mbh._adapters.inhouse.dynamics.range_space_acceleration`, the truncated projection
+of :class:`mbh._adapters.inhouse.stabilisation.DirectCorrection`; and
+:func:`mbh._harness.neutral.conditioning.label_failure`.
 """
 
 from __future__ import annotations
@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 import scipy.linalg
 
-from adapters import get_adapter
-from adapters.inhouse.constraints import ConstraintSystem
-from adapters.inhouse.kinematics import common_start
-from adapters.inhouse.dynamics import Dynamics, range_space_acceleration, solve_augmented
-from adapters.inhouse.linalg import truncated_solve
-from harness.model import scenario
-from harness.run.case import run_case
-from harness.neutral.conditioning import conditioning
-from harness.model.outputs import output_series
-from harness.references.build import reference_trajectory
+from mbh._adapters import get_adapter
+from mbh._adapters.inhouse.constraints import ConstraintSystem
+from mbh._adapters.inhouse.kinematics import common_start
+from mbh._adapters.inhouse.dynamics import Dynamics, range_space_acceleration, solve_augmented
+from mbh._adapters.inhouse.linalg import truncated_solve
+from mbh._harness.model import scenario
+from mbh._harness.run.case import run_case
+from mbh._harness.neutral.conditioning import conditioning
+from mbh._harness.model.outputs import output_series
+from mbh._harness.references.build import reference_trajectory
 
 
 def test_truncated_solve_is_the_minimum_norm_solution_without_the_lost_directions():

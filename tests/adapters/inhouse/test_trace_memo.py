@@ -11,11 +11,11 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from adapters import get_adapter
-from adapters.base import RunGrid
-from adapters.inhouse import generated, generated_store
-from harness.model import scenario
-from harness.model.timegrid import sample_times
+from mbh._adapters import get_adapter
+from mbh._adapters.base import RunGrid
+from mbh._adapters.inhouse import generated, generated_store
+from mbh._harness.model import scenario
+from mbh._harness.model.timegrid import sample_times
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from adapters.integrators import (
+from mbh._adapters.integrators import (
     DIVERGED,
     FAILED,
     RUNNING,
@@ -18,7 +18,7 @@ from adapters.integrators import (
     is_adaptive,
     make_integrator,
 )
-from adapters.integrators.nystrom import step_rule
+from mbh._adapters.integrators.nystrom import step_rule
 
 T_END = 2.0
 Q0 = np.array([1.0])

@@ -1,7 +1,7 @@
 """Lie-group stepping keeps the order of RK4 and RKN4 where rotations do not commute.
 
 The explicit methods step in the exponential chart around the current configuration
-(:mod:`adapters.integrators.nystrom`, "Lie groups"): Runge–Kutta–Munthe-Kaas for Runge–Kutta
+(:mod:`mbh._adapters.integrators.nystrom`, "Lie groups"): Runge–Kutta–Munthe-Kaas for Runge–Kutta
 tableaus, the chart's second-order equation for RKN4.  Before (plain composition of stage
 velocities, the dropped commutator term) the measured slopes were 2.00 (free top, rk4 and rkn4),
 2.00/1.99 (spatial slider-crank, rk4/rkn4 + newton-euler) and 2.00 (Pinocchio rk4 with a
@@ -15,18 +15,18 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
-from adapters import get_adapter
-from adapters.inhouse.constraints import layout_of
-from adapters.inhouse.kinematics import assemble
-from adapters.inhouse.newton_euler import NewtonEuler
-from adapters.inhouse.states import body_states
-from adapters.integrators import RUNNING, make_integrator, so3
-from adapters.pinocchio_adapter.adapter import solver_settings
-from adapters.pinocchio_adapter.dynamics import ConstrainedProblem
-from adapters.pinocchio_adapter.stepping import LieGroupProblem, constrained_problem
-from harness.model import scenario
-from harness.model.mechanism import Body, InitialState, Mechanism
-from harness.references.build import reference_trajectory
+from mbh._adapters import get_adapter
+from mbh._adapters.inhouse.constraints import layout_of
+from mbh._adapters.inhouse.kinematics import assemble
+from mbh._adapters.inhouse.newton_euler import NewtonEuler
+from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.integrators import RUNNING, make_integrator, so3
+from mbh._adapters.pinocchio_adapter.adapter import solver_settings
+from mbh._adapters.pinocchio_adapter.dynamics import ConstrainedProblem
+from mbh._adapters.pinocchio_adapter.stepping import LieGroupProblem, constrained_problem
+from mbh._harness.model import scenario
+from mbh._harness.model.mechanism import Body, InitialState, Mechanism
+from mbh._harness.references.build import reference_trajectory
 
 FOURTH_ORDER = ["rk4", "rkn4"]
 

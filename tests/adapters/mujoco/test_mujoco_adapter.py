@@ -11,14 +11,14 @@ import pytest
 from tests.helpers import VERIFIED_SCENES
 from scipy.spatial.transform import Rotation
 
-from adapters.base import UnsupportedCase
-from adapters.mujoco_adapter import MujocoAdapter, export_mjcf
-from adapters.mujoco_adapter.build import floored_inertia, point_moment
-from adapters.mujoco_adapter.methods import INTEGRATORS
-from harness.neutral.start import initial_state
-from harness.model.mechanism import BodyTorque, JointActuation, SpringDamper
-from harness.model.outputs import output_series
-from harness.model.scenario import load, scenario_names
+from mbh._adapters.base import UnsupportedCase
+from mbh._adapters.mujoco_adapter import MujocoAdapter, export_mjcf
+from mbh._adapters.mujoco_adapter.build import floored_inertia, point_moment
+from mbh._adapters.mujoco_adapter.methods import INTEGRATORS
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.model.mechanism import BodyTorque, JointActuation, SpringDamper
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.scenario import load, scenario_names
 
 ADAPTER = MujocoAdapter()
 SCENARIOS = scenario_names()
@@ -312,7 +312,7 @@ def test_divergence_inside_a_chunk_is_found_by_replay(every, samples):
 
 
 def test_divergence_warnings_are_the_bad_state_ones():
-    from adapters.mujoco_adapter.stepping import DIVERGENCE_WARNINGS
+    from mbh._adapters.mujoco_adapter.stepping import DIVERGENCE_WARNINGS
 
     watched = range(mujoco.mjtWarning.mjNWARNING)[DIVERGENCE_WARNINGS]
     assert list(watched) == [mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,

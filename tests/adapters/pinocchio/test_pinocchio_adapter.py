@@ -13,18 +13,18 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from adapters import get_adapter
-from adapters.base import UnsupportedCase
-from adapters.integrators import make_integrator
-from adapters.pinocchio_adapter.adapter import solver_settings
-from adapters.pinocchio_adapter.dynamics import ConstrainedProblem, pseudo_inverse
-from adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
-from adapters.pinocchio_adapter.state import joint_state
-from harness.neutral.start import initial_state
-from harness.neutral.dynamics import accelerations, start_accelerations
-from harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
-from harness.model.outputs import output_series
-from harness.model.scenario import load, scenario_names
+from mbh._adapters import get_adapter
+from mbh._adapters.base import UnsupportedCase
+from mbh._adapters.integrators import make_integrator
+from mbh._adapters.pinocchio_adapter.adapter import solver_settings
+from mbh._adapters.pinocchio_adapter.dynamics import ConstrainedProblem, pseudo_inverse
+from mbh._adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
+from mbh._adapters.pinocchio_adapter.state import joint_state
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.neutral.dynamics import accelerations, start_accelerations
+from mbh._harness.model.mechanism import GROUND, Body, InitialState, Joint, Mechanism
+from mbh._harness.model.outputs import output_series
+from mbh._harness.model.scenario import load, scenario_names
 from tests.helpers import DATA
 
 ADAPTER = get_adapter("pinocchio")
@@ -303,7 +303,7 @@ def test_unreachable_start_fails_with_reason(monkeypatch):
         state.velocity[0] += (0.0, 0.0, 1.0)
         return state
 
-    monkeypatch.setattr("adapters.pinocchio_adapter.adapter.initial_state", drifting_start)
+    monkeypatch.setattr("mbh._adapters.pinocchio_adapter.adapter.initial_state", drifting_start)
     trajectory = _run(mech, "best", 1e-3, 0.01)
     assert trajectory.status == "failed"
     assert trajectory.failure_time == 0.0
@@ -369,7 +369,7 @@ def test_a_one_joint_tree_runs():
     # start conversion ("LinAlgError: Incompatible dimensions", found by the generated-mechanism
     # suite).  A bar spun at 40 rad/s about a ground revolute, 0.01 s: Pinocchio's final rate
     # matches the in-house formulation's to 7.3e-13 rad/s (both RK4 at 1e-4); bound 1e-10.
-    from adapters import get_adapter
+    from mbh._adapters import get_adapter
 
     z, x = np.array([0.0, 0.0, 1.0]), np.array([1.0, 0.0, 0.0])
     bar = Body("bar", 1.0, np.diag([1 / 12, 1 / 12, 1e-3]), np.array([0.5, 0.0, 0.0]), np.eye(3))

@@ -10,10 +10,10 @@ import numpy as np
 import pybullet
 import pytest
 
-from adapters.pybullet_adapter import PybulletAdapter, bullet_world
-from adapters.pybullet_adapter.loads import _body_wrenches
-from adapters.pybullet_adapter.state import _link_poses, _read_states
-from harness.model.scenario import load
+from mbh._adapters.pybullet_adapter import PybulletAdapter, bullet_world
+from mbh._adapters.pybullet_adapter.loads import _body_wrenches
+from mbh._adapters.pybullet_adapter.state import _link_poses, _read_states
+from mbh._harness.model.scenario import load
 
 #: Two computation paths of the same rotations (a matrix from Bullet's quaternion, or that
 #: quaternion turned into the body's and back): measured equal to the bit on both scenes; the

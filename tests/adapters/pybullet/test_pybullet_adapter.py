@@ -13,12 +13,12 @@ import pybullet
 import pytest
 from tests.helpers import DATA, VERIFIED_SCENES
 
-from adapters.base import UnsupportedCase
-from adapters.pybullet_adapter import PybulletAdapter, bullet_world
-from harness.neutral.start import initial_state
-from harness.model.mechanism import Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism
-from harness.model.scenario import load, scenario_names
-from harness.model.trajectory import BodyStates, Trajectory
+from mbh._adapters.base import UnsupportedCase
+from mbh._adapters.pybullet_adapter import PybulletAdapter, bullet_world
+from mbh._harness.neutral.start import initial_state
+from mbh._harness.model.mechanism import Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism
+from mbh._harness.model.scenario import load, scenario_names
+from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 ADAPTER = PybulletAdapter()
 SCENARIOS = VERIFIED_SCENES
@@ -143,7 +143,7 @@ def test_inertia_set_explicitly(scenario):
     turned by its inertial frame's world orientation against A J̄ Aᵀ from the harness's start
     (a misoriented inertia frame fails; sorted moments would not see it).  Measured difference
     ≤ 5.5e-16 of the largest moment; bound 1e-12 (two computation paths, the cross-CPU floor)."""
-    from harness.model.outputs import body_rotations
+    from mbh._harness.model.outputs import body_rotations
 
     mech = load(scenario)
     model = ADAPTER.build(mech)
@@ -230,7 +230,7 @@ def test_spherical_joint_motor_is_off(monkeypatch):
     mech = _wheel(0.0, "spherical", gravity=(0.0, -9.81, 0.0))
     at_rest = BodyStates(np.array([b.position for b in mech.bodies]),
                          np.array([[1.0, 0.0, 0.0, 0.0]]), np.zeros((1, 3)), np.zeros((1, 3)))
-    monkeypatch.setattr("adapters.pybullet_adapter.world.initial_state", lambda _mech: at_rest)
+    monkeypatch.setattr("mbh._adapters.pybullet_adapter.world.initial_state", lambda _mech: at_rest)
     trajectory = _spin_rate(mech, 0.05)
     assert trajectory.velocity[-1, 0, 1] == pytest.approx(-0.338, abs=0.01)
 

@@ -2,9 +2,9 @@
 absolute coordinates (x, y, φ per body) on the index-1 equations of motion with Baumgarte
 stabilisation and fixed-step RK4.
 
-Written against docs/adapter-contract.md only: it subclasses ``adapters.base.Adapter`` and
-``adapters.base.Stepper``, reads the neutral ``Mechanism``, starts from the harness's assembled
-state (``harness.neutral.start.initial_state``) and returns ``BodyStates``.  Registered by the
+Written against docs/adapter-contract.md only: it subclasses ``mbh._adapters.base.Adapter`` and
+``mbh._adapters.base.Stepper``, reads the neutral ``Mechanism``, starts from the harness's assembled
+state (``mbh._harness.neutral.start.initial_state``) and returns ``BodyStates``.  Registered by the
 entry point ``toy = "mbh_toy_adapter:ToyAdapter"`` in the group ``mbh.adapters``.
 """
 
@@ -14,10 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adapters.base import Adapter, MethodSpec, RunFailure, Stepper, UnsupportedCase
-from harness.model.mechanism import (GROUND, BodyForce, BodyTorque, JointActuation, Mechanism)
-from harness.model.trajectory import BodyStates
-from harness.neutral.start import initial_state
+from mbh._adapters.base import Adapter, MethodSpec, RunFailure, Stepper, UnsupportedCase
+from mbh._harness.model.mechanism import (GROUND, BodyForce, BodyTorque, JointActuation, Mechanism)
+from mbh._harness.model.trajectory import BodyStates
+from mbh._harness.neutral.start import initial_state
 
 __version__ = "0.1.0"
 
