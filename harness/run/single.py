@@ -23,6 +23,9 @@ from mbh._harness.run.case import CaseResult
 from mbh._harness.run.row import run_spec
 from mbh._harness.run.spec import CaseSpec
 
+#: Most steps a case may take (a longer run is an input error, not hours of computing).
+MAX_STEPS = 1e8
+
 
 class CaseInputError(MbhError, ValueError):
     """Raised once with every problem of a case's arguments, each as ``argument: problem``."""
@@ -39,9 +42,54 @@ def _checked_step(dt, t_end: float, mech: Mechanism, problems: list[str]) -> Non
         return
     try:
         steps_per_sample(float(dt), mech.sample_step)
-        steps_in(float(dt), t_end)
+        steps = steps_in(float(dt), t_end)
     except ValueError as error:
         problems.append(f"dt: {error}")
+        return
+    if steps > MAX_STEPS:
+        problems.append(f"dt: step {dt:g} s would take {t_end / dt:.3g} steps to {t_end:g} s "
+                        f"(at most {MAX_STEPS:.0e}); give a larger step")
+
+
+def check_case(mech: Mechanism, adapter: str, method: str, dt, t_end, repetitions=1) -> float:
+    """Check a case's arguments against ``mech`` before anything runs.
+
+    Parameters
+    ----------
+    mech : Mechanism
+        The loaded scene.
+    adapter, method, dt, t_end, repetitions
+        As :func:`run_one`'s.
+
+    Returns
+    -------
+    float
+        The end time, s (``t_end``, or the scene's duration when it is None).
+
+    Raises
+    ------
+    CaseInputError
+        With every problem, each naming its argument.
+    """
+    problems = []
+    if adapter not in adapter_names():
+        problems.append(f"adapter: unknown adapter {adapter!r} (known: {', '.join(adapter_names())})")
+    else:
+        try:
+            get_adapter(adapter).method_spec(method)
+        except ValueError as error:
+            problems.append(f"method: {error}")
+    duration = mech.duration if t_end is None else t_end
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not 0 < duration <= mech.duration:
+        problems.append(f"t_end: expected a time in (0, {mech.duration!r}] s, got {t_end!r}")
+    else:
+        _checked_step(dt, float(duration), mech, problems)
+    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
+        problems.append(f"repetitions: expected an integer >= 1, got {repetitions!r}")
+    if problems:
+        raise CaseInputError(problems)
+    return float(duration)
 
 
 def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
@@ -82,24 +130,7 @@ def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
         Any other argument is invalid (every problem, naming the argument).
     """
     mech = scene if isinstance(scene, Mechanism) else scenario.load(scene)
-    problems = []
-    if adapter not in adapter_names():
-        problems.append(f"adapter: unknown adapter {adapter!r} (known: {', '.join(adapter_names())})")
-    else:
-        try:
-            get_adapter(adapter).method_spec(method)
-        except ValueError as error:
-            problems.append(f"method: {error}")
-    duration = mech.duration if t_end is None else t_end
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
-            or not 0 < duration <= mech.duration:
-        problems.append(f"t_end: expected a time in (0, {mech.duration!r}] s, got {t_end!r}")
-    else:
-        _checked_step(dt, float(duration), mech, problems)
-    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
-        problems.append(f"repetitions: expected an integer >= 1, got {repetitions!r}")
-    if problems:
-        raise CaseInputError(problems)
+    duration = check_case(mech, adapter, method, dt, t_end, repetitions)
     name = mech.name if isinstance(scene, Mechanism) else str(scene)
-    spec = CaseSpec(name, adapter, method, float(dt), float(duration), repetitions)
+    spec = CaseSpec(name, adapter, method, float(dt), duration, repetitions)
     return run_spec(spec, bounds, accuracy, mech=mech)

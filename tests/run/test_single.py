@@ -20,6 +20,14 @@ def test_every_bad_argument_is_named_at_once():
         run_one("fourbar", "mujoco", dt=2e-3, t_end=0.005)
 
 
+def test_a_step_beyond_the_step_limit_is_refused_before_it_runs():
+    # 4 s at 1e-300 s: a step that divides the grid, but 4e+300 steps (the limit is 1e+08)
+    with pytest.raises(CaseInputError) as raised:
+        run_one("fourbar", "mujoco", dt=1e-300)
+    assert raised.value.problems == [
+        "dt: step 1e-300 s would take 4e+300 steps to 4 s (at most 1e+08); give a larger step"]
+
+
 def test_an_unknown_scene_is_the_loaders_error():
     with pytest.raises(scenario.ScenarioError, match="no such scenario file"):
         run_one("no_such_scene", "mujoco")
