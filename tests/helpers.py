@@ -148,18 +148,25 @@ EXAMPLE_PAGE = ROOT / "docs" / "formats" / "tolerances.md"
 EXAMPLE_SECTION = "## An example suite"
 
 
-def example_suite_files() -> dict[str, str]:
-    """The example files of the documentation's example suite: every fenced block whose first
-    line is ``# <file name>`` (a .py or .toml file), by file name."""
-    text = EXAMPLE_PAGE.read_text(encoding="utf-8")
-    section = text[text.index(EXAMPLE_SECTION):]
-    section = section[:section.index("\n## ", len(EXAMPLE_SECTION))]
+def page_files(page: Path, section: str) -> dict[str, str]:
+    """The files a documentation page writes out in one of its sections (from the heading
+    ``section`` to the next ``## `` heading): every fenced block whose first line is
+    ``# <file path>`` (a .py or .toml file), by path."""
+    text = page.read_text(encoding="utf-8")
+    start = text.index(section)
+    end = text.find("\n## ", start + len(section))
     files = {}
-    for block in re.findall(r"```[a-z]*\n(.*?)```", section, flags=re.DOTALL):
+    for block in re.findall(r"```[a-z]*\n(.*?)```", text[start:end if end >= 0 else None],
+                            flags=re.DOTALL):
         found = re.match(r"# (\S+\.(?:py|toml))\b", block)
         if found:
             files[found.group(1)] = block
     return files
+
+
+def example_suite_files() -> dict[str, str]:
+    """The example files of the documentation's example suite (:func:`page_files`)."""
+    return page_files(EXAMPLE_PAGE, EXAMPLE_SECTION)
 
 
 def parallel_revolute_fourbar():

@@ -3,8 +3,10 @@ with ``METADATA`` and ``entry_points.txt``) written into a temporary folder on `
 on ``PYTHONPATH`` for a subprocess) is what ``importlib.metadata.entry_points`` reads for an
 installed package, so the registry finds it as it finds a pip-installed one.
 
-The toy adapter package (tests/data/mbh_toy_adapter) is registered from its own
-``pyproject.toml``: its name, version and entry points.
+The toy adapter package is the one the adapter guide (docs/adapter-contract.md, "A complete
+example") prints: its files are written from the guide's blocks as they stand, and registered from
+its own ``pyproject.toml`` (name, version, entry points).  The user's test file that holds it to
+the reference is the guide's too ("Using it").
 """
 
 from __future__ import annotations
@@ -16,21 +18,23 @@ from pathlib import Path
 
 import pytest
 
-from tests.helpers import ROOT
+from tests.helpers import ROOT, page_files
 
-#: The third-party adapter package of the tests, source folder (its pyproject.toml beside).
-TOY = ROOT / "tests" / "data" / "mbh_toy_adapter"
+#: The adapter guide, which holds the toy adapter package and a user's test file of it.
+GUIDE = ROOT / "docs" / "adapter-contract.md"
+#: The toy package's files (path → text), from the guide.
+TOY_FILES = page_files(GUIDE, "## A complete example")
+#: A user's test file holding the toy adapter to the reference through the plugin, from the guide.
+USER_TEST = page_files(GUIDE, "## Using it")["test_my_solver.py"]
 
-#: A user's test file holding the toy adapter to the reference through the plugin.
-USER_TEST = """\
-from mbh._harness.testing.tolerances import assert_close_to_reference, assert_status
 
-
-def test_my_solver_on_the_fourbar(mbh_runner):
-    result = mbh_runner.case("fourbar", "toy", "best", dt=1e-3, t_end=0.5)
-    assert_status(result)
-    assert_close_to_reference(result, "crank_angle", atol=1e-7)  # measured 4.7e-9 rad
-"""
+def write_toy_package(folder: Path) -> Path:
+    """Write the toy adapter package's source (its pyproject.toml and module) into ``folder``;
+    returns ``folder``, which holds the importable module ``mbh_toy_adapter``."""
+    for name, text in TOY_FILES.items():
+        (folder / name).parent.mkdir(parents=True, exist_ok=True)
+        (folder / name).write_text(text, encoding="utf-8")
+    return folder
 
 
 def write_distribution(folder: Path, name: str, version: str, adapters: dict[str, str]) -> None:
@@ -45,7 +49,13 @@ def write_distribution(folder: Path, name: str, version: str, adapters: dict[str
 
 def toy_project() -> dict:
     """The ``[project]`` table of the toy package's pyproject.toml."""
-    return tomllib.loads((TOY / "pyproject.toml").read_text())["project"]
+    return tomllib.loads(TOY_FILES["pyproject.toml"])["project"]
+
+
+@pytest.fixture(scope="session")
+def toy_source(tmp_path_factory) -> Path:
+    """The toy package's source folder, written from the guide once per session."""
+    return write_toy_package(tmp_path_factory.mktemp("toy") / "mbh_toy_adapter")
 
 
 @pytest.fixture
@@ -60,18 +70,26 @@ def toy_folder(tmp_path) -> Path:
 
 
 @pytest.fixture
-def toy(toy_folder, monkeypatch) -> Path:
+def toy_module(toy_source, monkeypatch, forget_modules) -> Path:
+    """The toy package's module importable in this process for one test, not registered;
+    returns its source folder."""
+    monkeypatch.syspath_prepend(str(toy_source))
+    forget_modules("mbh_toy_adapter")
+    return toy_source
+
+
+@pytest.fixture
+def toy(toy_module, toy_folder, monkeypatch) -> Path:
     """The toy adapter registered in this process for one test; returns the metadata folder,
     where a test may write more distributions and modules."""
-    monkeypatch.syspath_prepend(str(TOY))
     monkeypatch.syspath_prepend(str(toy_folder))
     return toy_folder
 
 
 @pytest.fixture
-def toy_environment(toy_folder) -> dict:
+def toy_environment(toy_folder, toy_source) -> dict:
     """An environment for a subprocess in which the toy adapter is registered."""
-    paths = [str(toy_folder), str(TOY), os.environ.get("PYTHONPATH", "")]
+    paths = [str(toy_folder), str(toy_source), os.environ.get("PYTHONPATH", "")]
     return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, paths))}
 
 

@@ -2,7 +2,7 @@
 broke — an import error, a class that is no adapter, an exception in ``version()``, ``build``,
 ``_start`` or a step, states of the wrong shape — and never a traceback that ends a campaign.
 
-The broken adapters are variations of the toy adapter (tests/data/mbh_toy_adapter) declared by a
+The broken adapters are variations of the toy adapter (the adapter guide's package) declared by a
 fake distribution ``mbh-broken-adapters 0.0.1`` (tests/adapters/conftest.py).
 """
 

@@ -2,7 +2,7 @@
 built-in engines without importing any engine, listed by ``mbh adapters`` with their origin,
 named in campaign files and ``--mbh-adapters``, run, judged and reported like a built-in engine.
 
-The toy adapter (tests/data/mbh_toy_adapter, written against docs/adapter-contract.md only) is
+The toy adapter (the adapter guide's package, written against ``mbh.adapters`` alone) is
 registered through a temporary dist-info folder (tests/adapters/conftest.py).
 """
 

@@ -1,20 +1,19 @@
 """The harness as a user installs it: one fresh virtual environment per test session, outside the
 checkout, with the wheel built from the checkout, the tests' toy third-party adapter package
-(tests/data/mbh_toy_adapter) and pytest installed at the tested versions (constraints.txt), used
-from a folder of the user's with its own cache and data folders (XDG_CACHE_HOME, XDG_DATA_HOME).
+(written from the adapter guide: tests/adapters/conftest.py) and pytest installed at the tested
+versions (constraints.txt), used from a folder of the user's with its own cache and data folders (XDG_CACHE_HOME, XDG_DATA_HOME).
 Building it takes minutes: every suite using it is ``slow``."""
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from tests.adapters.conftest import TOY
+from tests.adapters.conftest import write_toy_package
 from tests.helpers import ROOT
 
 
@@ -35,7 +34,7 @@ def installed(tmp_path_factory):
     run([sys.executable, "-m", "pip", "wheel", ROOT, "--no-deps", "-q", "-w", base / "dist"],
         base, env)
     wheel, = (base / "dist").glob("mbh-*.whl")
-    toy = shutil.copytree(TOY, base / "mbh_toy_adapter")  # pip builds in the source folder
+    toy = write_toy_package(base / "mbh_toy_adapter")
     run([sys.executable, "-m", "venv", base / "venv"], base, env)
     bin_folder = base / "venv" / "bin"
     run([bin_folder / "python", "-m", "pip", "install", "-q", "-c", ROOT / "constraints.txt",
