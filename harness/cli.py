@@ -323,7 +323,7 @@ def cmd_run(args) -> int:
     """Run a campaign into the result store (see :mod:`mbh._harness.run.campaign`)."""
     from mbh._harness.run.spec import CampaignError, load_campaign
     from mbh._harness.run.campaign import CampaignInterrupted, RunnerError, run_campaign
-    from mbh._harness.store.runs import StoreError
+    from mbh._harness.store.problems import StoreError
 
     try:
         campaign = load_campaign(args.campaign)
@@ -419,7 +419,7 @@ def _bench_front(args) -> None:
 
 
 def cmd_runs(args) -> int:
-    from mbh._harness.store.runs import list_runs
+    from mbh._harness.store.manifest import list_runs
 
     try:
         manifests = list_runs(_results_root(args))

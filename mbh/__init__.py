@@ -27,7 +27,9 @@ from mbh._harness.run.single import CaseInputError
 from mbh._harness.run.single import run_one as run_case
 from mbh._harness.run.spec import CampaignError, campaign_names, load_campaign
 from mbh._harness.store.compare import compare_runs
-from mbh._harness.store.runs import RunStore, list_runs, load_run, results_root
+from mbh._harness.store.location import results_root
+from mbh._harness.store.manifest import list_runs
+from mbh._harness.store.runs import RunStore, load_run
 
 
 def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool = False,

@@ -54,7 +54,8 @@ from mbh._harness.run.row import CaseWork
 from mbh._harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
-from mbh._harness.store.runs import RunStore, latest_run, list_runs
+from mbh._harness.store.manifest import latest_run, list_runs
+from mbh._harness.store.runs import RunStore
 from mbh._harness.common.numbers import format_number
 
 #: Default campaign of ``mbh nightly``.
@@ -354,7 +355,7 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
     campaign_name : str
         Shipped campaign name or campaign file.
     root : path, optional
-        Results root (default :func:`mbh._harness.store.runs.results_root`).
+        Results root (default :func:`mbh._harness.store.location.results_root`).
     workers : int, optional
         Local worker processes (default: the cores).
     gate : str

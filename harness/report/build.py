@@ -32,7 +32,8 @@ from mbh._harness.report.summary import Table
 from mbh._harness.model.scenario import ScenarioError
 from mbh._harness.measure.verdict import DEFAULT_ACCURACY
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
-from mbh._harness.store.runs import RunStore, latest_run
+from mbh._harness.store.manifest import latest_run
+from mbh._harness.store.runs import RunStore
 from mbh._harness.common.errors import MbhError
 
 #: Output formats :func:`build_report` writes.

@@ -29,7 +29,8 @@ import pandas as pd
 
 from mbh._harness.common.errors import MbhError
 from mbh._harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
-from mbh._harness.store.runs import RunStore, list_runs
+from mbh._harness.store.manifest import list_runs
+from mbh._harness.store.runs import RunStore
 
 __all__ = ["QUANTITIES", "STATUS", "History", "HistoryError", "load_history", "find_changes",
            "version_changes", "open_regressions"]

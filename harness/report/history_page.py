@@ -21,7 +21,7 @@ from mbh._harness.report.history import (QUANTITIES, STATUS, History, find_chang
                                     version_changes)
 from mbh._harness.report.history_figures import method_family, trend_figure
 from mbh._harness.report.style import Figure
-from mbh._harness.store.runs import results_root
+from mbh._harness.store.location import results_root
 
 __all__ = ["HistoryPage", "TrendView", "collect_history", "render_history", "build_history",
            "report_link", "HISTORY_FILE"]

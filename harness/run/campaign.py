@@ -40,7 +40,9 @@ from mbh._harness.run.calibration import CALIBRATION, WithCalibration, calibrati
 from mbh._harness.run.row import CaseWork
 from mbh._harness.run.executor import WorkerProcesses, execute, usable_cores
 from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
-from mbh._harness.store.runs import CaseCache, RunLocked, RunStore
+from mbh._harness.store.cache import CaseCache
+from mbh._harness.store.runs import RunStore
+from mbh._harness.store.writer_lock import RunLocked
 from mbh._harness.run.sweep import bisections, stability_sweep
 from mbh._harness.common.errors import MbhError
 

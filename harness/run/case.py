@@ -58,7 +58,7 @@ class CaseResult:
                              "in a campaign")
         # Imported here: a case's process (forked from the warm template, or a fresh interpreter)
         # never needs pandas and pyarrow, whose import added 0.37 s to the template's start.
-        from mbh._harness.store.runs import case_frame
+        from mbh._harness.store.rows import case_frame
 
         return case_frame(self.row)
 

@@ -27,7 +27,7 @@ from mbh._harness import cli
 
 from mbh._harness.jobs import nightly
 from mbh._harness.run.row import CaseWork
-from mbh._harness.store.runs import list_runs
+from mbh._harness.store.manifest import list_runs
 from tests.helpers import ROOT
 
 CAMPAIGN = """

@@ -29,7 +29,7 @@ from mbh._harness.jobs import nightly
 from mbh._harness.run import campaign as campaign_run
 from mbh._harness.run.calibration import CALIBRATION, WithCalibration
 from mbh._harness.run.row import CaseWork
-from mbh._harness.store.runs import list_runs
+from mbh._harness.store.manifest import list_runs
 from tests.helpers import run_mbh
 
 pytestmark = pytest.mark.slow  # five campaign runs and one report: about a minute

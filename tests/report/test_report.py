@@ -18,7 +18,8 @@ import pandas as pd
 import pytest
 
 from mbh._harness.report import build
-from mbh._harness.store.runs import RunStore, latest_run
+from mbh._harness.store.manifest import latest_run
+from mbh._harness.store.runs import RunStore
 from tests.helpers import MBH, run_mbh, seed_rows
 
 #: Markup in a scenario name and in a method parameter (the escaping test's run).

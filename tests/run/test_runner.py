@@ -26,7 +26,8 @@ from mbh._harness.run.spec import load_campaign
 from mbh._harness.run.campaign import run_campaign
 from mbh._harness.run.row import CaseWork
 from mbh._harness.model.timegrid import EVALUATION_STEP
-from mbh._harness.store.runs import RunStore, list_runs
+from mbh._harness.store.manifest import list_runs
+from mbh._harness.store.runs import RunStore
 from mbh._harness.run.sweep import Bisection, stability_sweep
 from mbh._harness.measure.verdict import Bounds
 

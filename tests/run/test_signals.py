@@ -24,7 +24,7 @@ import pytest
 
 from mbh._harness.run.executor import _dask_case, _end_dask_execution, execute
 from mbh._harness.run.spec import load_campaign
-from mbh._harness.store.runs import list_runs
+from mbh._harness.store.manifest import list_runs
 
 MBH = [sys.executable, "-m", "mbh._harness.cli"]
 

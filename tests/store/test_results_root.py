@@ -26,8 +26,10 @@ import pytest
 from mbh._harness import cli
 from mbh._harness.run.campaign import run_campaign
 from mbh._harness.run.spec import load_campaign
-from mbh._harness.store import runs
-from mbh._harness.store.runs import RunStore, StoreError
+from mbh._harness.store import files, location
+from mbh._harness.store.manifest import list_runs
+from mbh._harness.store.problems import StoreError
+from mbh._harness.store.runs import RunStore, load_run
 from tests.store.store_cases import RUNNABLE_CAMPAIGN, SPECS, campaign, row_for, trajectory
 
 CAMPAIGN = RUNNABLE_CAMPAIGN
@@ -36,7 +38,7 @@ CAMPAIGN = RUNNABLE_CAMPAIGN
 def failing_writes(monkeypatch, code: int, after: int = 0, only=("",)) -> None:
     """Make the store's atomic writes raise OSError(``code``) once ``after`` writes whose path
     contains one of ``only`` have succeeded (every later one fails, as on a full disk)."""
-    real, done = runs._atomic_write, []
+    real, done = files._atomic_write, []
 
     def write(path: Path, content) -> None:
         if any(part in str(path) for part in only):
@@ -45,7 +47,7 @@ def failing_writes(monkeypatch, code: int, after: int = 0, only=("",)) -> None:
             done.append(path)
         real(path, content)
 
-    monkeypatch.setattr(runs, "_atomic_write", write)
+    monkeypatch.setattr(files, "_atomic_write", write)
 
 
 def read_only(root: Path, monkeypatch) -> str:
@@ -124,8 +126,8 @@ def test_a_full_disk_is_refused(tmp_path, monkeypatch):
 
 
 def test_a_nearly_full_disk_is_refused(tmp_path, monkeypatch):
-    free = runs.MIN_FREE_BYTES - 1
-    monkeypatch.setattr(runs.shutil, "disk_usage",
+    free = location.MIN_FREE_BYTES - 1
+    monkeypatch.setattr(location.shutil, "disk_usage",
                         lambda path: shutil._ntuple_diskusage(10**12, 10**12 - free, free))
     with pytest.raises(StoreError, match=r"only 16\.0 MiB free on its disk; a run needs at "
                                          r"least 16 MiB"):
@@ -227,9 +229,9 @@ def test_a_campaign_whose_disk_fills_stops_and_resumes_to_every_case(tmp_path, m
     failing_writes(monkeypatch, errno.ENOSPC, after=2, only=("/cases/part-",))
     with pytest.raises(StoreError, match="the run stops"):
         run_campaign(tiny, workers=1, root=root, quiet=True)
-    (run_id,) = [m["run_id"] for m in runs.list_runs(root)]
-    assert runs.list_runs(root)[0]["status"] == "interrupted"
-    assert len(runs.load_run(run_id, root)) == 2
+    (run_id,) = [m["run_id"] for m in list_runs(root)]
+    assert list_runs(root)[0]["status"] == "interrupted"
+    assert len(load_run(run_id, root)) == 2
     monkeypatch.undo()
     store = run_campaign(tiny, workers=1, root=root, resume=run_id, quiet=True)
     assert store.manifest["status"] == "complete"

@@ -24,6 +24,9 @@ import mbh
 from mbh._harness.common import environment
 from mbh._harness.store import compare as run_compare
 from mbh._harness.store import runs as store
+from mbh._harness.store.cache import UNCACHED_STATUSES, CaseCache
+from mbh._harness.store.location import ROOT_ENV
+from mbh._harness.store.manifest import list_runs
 from mbh._harness.run.spec import load_campaign
 from mbh._harness.store.schema import SCHEMA_VERSION, SchemaError
 from mbh._harness.model.trajectory import Trajectory
@@ -37,7 +40,7 @@ V1_RUN = "20260101T000000Z-v1demo"
 @pytest.fixture
 def root(tmp_path, monkeypatch) -> Path:
     results = tmp_path / "results"
-    monkeypatch.setenv(store.ROOT_ENV, str(results))
+    monkeypatch.setenv(ROOT_ENV, str(results))
     return results
 
 
@@ -203,7 +206,7 @@ def test_a_shipped_campaign_makes_a_run(root):
     assert run.done_case_ids() == {spec.case_id for spec in shipped.cases}
     spec = shipped.cases[-1]
     np.testing.assert_array_equal(run.trajectory(spec.case_id).times, trajectory().times)
-    cache = store.CaseCache()
+    cache = CaseCache()
     cache.put(spec, "h", "1", "s", row_for(spec), None)
     assert cache.lookup(spec, "h", "1", "s")[0]["case_id"] == spec.case_id
 
@@ -256,7 +259,7 @@ def test_list_runs_oldest_first(root):
         run.manifest["started"] = started
         run._write_manifest()
     (root / "cache").mkdir()  # the cache folder is not a run
-    assert [m["campaign"] for m in store.list_runs()] == ["c", "b", "a"]
+    assert [m["campaign"] for m in list_runs()] == ["c", "b", "a"]
     assert [m["campaign"] for m in mbh.list_runs(root)] == ["c", "b", "a"]
 
 
@@ -273,7 +276,7 @@ def test_sweep_rows_have_their_own_table(root):
 # --- cache ------------------------------------------------------------------------------------
 
 def test_cache_hits_an_identical_case_and_misses_on_every_key_part(root):
-    cache = store.CaseCache()
+    cache = CaseCache()
     spec = SPECS[1]
     row = row_for(spec, error_crank_angle=float("nan"), accurate=None, steps=None)
     stored = trajectory(wall_time_s=0.1)
@@ -300,14 +303,14 @@ def test_cache_hits_an_identical_case_and_misses_on_every_key_part(root):
 
 
 def test_cache_keeps_the_first_entry_and_skips_machine_dependent_statuses(root):
-    cache = store.CaseCache()
+    cache = CaseCache()
     spec = SPECS[0]
     cache.put(spec, "h", "1", "s", row_for(spec, wall_time_s=1.0), None)
     cache.put(spec, "h", "1", "s", row_for(spec, wall_time_s=9.0), None)
     hit_row, hit_trajectory = cache.lookup(spec, "h", "1", "s")
     assert hit_row["wall_time_s"] == 1.0 and hit_trajectory is None
     assert hit_row["reused_from"] == "cache"
-    for status in store.UNCACHED_STATUSES:
+    for status in UNCACHED_STATUSES:
         cache.put(spec, "h", status, "s", row_for(spec, status=status), None)
         assert cache.lookup(spec, "h", status, "s") is None
     assert not [p for p in (root / "cache").iterdir() if p.name.startswith(".")]
@@ -315,7 +318,7 @@ def test_cache_keeps_the_first_entry_and_skips_machine_dependent_statuses(root):
 
 def test_a_cached_row_stored_again_carries_the_new_run_id(root):
     run = store.RunStore.create(campaign())
-    cache = store.CaseCache()
+    cache = CaseCache()
     spec = SPECS[0]
     run.add(row_for(spec), trajectory())
     cache.put(spec, "h", "1", "s", row_for(spec), trajectory(), run_id=run.run_id)
@@ -366,7 +369,7 @@ def test_a_schema_1_store_reads_migrated():
     assert list(frame["wall_time_per_step_s"].iloc[:2]) == [2.0 / 1000, 0.5 / 100]
     assert np.isnan(frame["wall_time_per_step_s"].iloc[2])  # no step taken
     assert list(frame["wall_time_per_sim_s"]) == [2.0 / 1.0, 0.5 / 1.0, 0.0 / 0.5]
-    assert [m["run_id"] for m in store.list_runs(V1_ROOT)] == [V1_RUN]
+    assert [m["run_id"] for m in list_runs(V1_ROOT)] == [V1_RUN]
 
 
 def test_a_schema_1_run_resumed_by_this_code_reads_as_one_table(tmp_path):

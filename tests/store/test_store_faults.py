@@ -25,8 +25,9 @@ from mbh._harness import cli
 from mbh._harness.run.row import run_spec
 from mbh._harness.run.spec import CaseSpec, load_campaign
 from mbh._harness.run.sweep import bisections, stability_sweep
-from mbh._harness.store import runs
-from mbh._harness.store.runs import MissingTrajectory, RunStore, StoreError, StoreWarning
+from mbh._harness.store.manifest import UNREADABLE, list_runs
+from mbh._harness.store.problems import MissingTrajectory, StoreError, StoreWarning
+from mbh._harness.store.runs import RunStore, load_run
 from tests.store.store_cases import RUNNABLE_CAMPAIGN
 
 CAMPAIGN = RUNNABLE_CAMPAIGN + """[sweep]
@@ -94,7 +95,7 @@ def mbh(*argv) -> tuple[int, str, str]:
 def case_ids(root: Path, run_id: str) -> list[str]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", StoreWarning)
-        return list(runs.load_run(run_id, root)["case_id"])
+        return list(load_run(run_id, root)["case_id"])
 
 
 # --- case and sweep parts ---------------------------------------------------------------------
@@ -107,7 +108,7 @@ def test_a_damaged_case_part_leaves_out_its_row_and_is_named(run, damage):
     DAMAGE[damage](part)
 
     with pytest.warns(StoreWarning, match=r"part-000001\.parquet: damaged part file"):
-        cases = runs.load_run(run_id, root)
+        cases = load_run(run_id, root)
     assert list(cases["case_id"]) == [intact[0], intact[2]]
     store = RunStore.open(run_id, root)
     store.cases()
@@ -154,14 +155,14 @@ def test_a_damaged_manifest_lists_as_unreadable_and_its_rows_still_read(run, sto
     manifest = root / run_id / "manifest.json"
     MANIFEST_DAMAGE[damage](manifest)
 
-    listed = {m["run_id"]: m["status"] for m in runs.list_runs(root)}
-    assert listed == {run_id: runs.UNREADABLE, other.run_id: "complete"}
+    listed = {m["run_id"]: m["status"] for m in list_runs(root)}
+    assert listed == {run_id: UNREADABLE, other.run_id: "complete"}
     status, out, err = mbh("runs", "--root", root)
     assert status == 0 and other.run_id in out and f"{run_id}  " in out
     assert err.startswith(f"mbh: warning: {manifest}: "), err
 
     with pytest.warns(StoreWarning, match="manifest.json"):
-        assert len(runs.load_run(run_id, root)) == 3
+        assert len(load_run(run_id, root)) == 3
     status, out, err = mbh("show", run_id, "--root", root)
     assert status == 0 and "3 cases of run" in out and str(manifest) in err
 
