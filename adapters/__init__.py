@@ -10,11 +10,19 @@ silently.
 Discovery reads installed metadata only: engines are imported lazily, so that listing adapters or
 running one engine never pays for (or fails on) another engine's import.  An adapter that cannot
 be loaded raises :class:`AdapterLoadError` naming the adapter and the package that provides it.
+
+A solver need not be registered to run: :func:`resolve_adapter` takes an adapter name, an
+:class:`~mbh._adapters.base.Adapter` subclass or an instance of one, and gives the adapter a case
+runs with, named and attributed exactly as a registered one (a class some installed package
+declares takes that registration's name and package; any other class runs under its own
+``name``, with no package).
 """
 
 from __future__ import annotations
 
+import copy
 import importlib
+import sys
 import warnings
 from dataclasses import dataclass
 from importlib.metadata import entry_points
@@ -44,6 +52,12 @@ class AdapterLoadError(MbhError, ImportError):
     """A registered adapter cannot be loaded (its module fails to import, its class is missing, is
     not an :class:`~mbh._adapters.base.Adapter` or fails to construct); the message names the adapter,
     the package that provides it and the error."""
+
+
+class AdapterChoiceError(MbhError, ValueError):
+    """An adapter given as a class or an instance that cannot stand for one: not an
+    :class:`~mbh._adapters.base.Adapter`, without a ``name``, or named like another registered
+    adapter; the message says which and what to change."""
 
 
 class AdapterClashWarning(UserWarning):
@@ -161,17 +175,95 @@ def get_adapter(name: str) -> Adapter:
     return adapter
 
 
-def version_or_problem(name: str) -> tuple[str | None, str]:
-    """(adapter ``name``'s ``version()``, ``""``), or (None, why) when the adapter cannot be
-    loaded or its ``version()`` raises; the reason names the adapter and its package."""
+def class_path(cls: type) -> str:
+    """``module:QualifiedName`` of a class, as an entry point names it."""
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+def _registration_of(cls: type) -> Registration | None:
+    """The registration whose target is ``cls`` (its module already imported), or None."""
+    for found in _discover()[0].values():
+        module_name, _, attribute = found.target.partition(":")
+        module = sys.modules.get(module_name)
+        if module is not None and getattr(module, attribute, None) is cls:
+            return found
+    return None
+
+
+def resolve_adapter(adapter: str | type[Adapter] | Adapter) -> Adapter:
+    """The adapter a case runs with, from a registered name, an Adapter subclass or an instance.
+
+    A name gives :func:`get_adapter`'s adapter.  A class is instantiated (no arguments); an
+    instance is used as it is (a shallow copy when its ``name`` or ``package`` must be set).  A
+    class that an entry point or the built-ins register takes that registration's name and
+    package, so its rows equal the registered adapter's; any other class runs under its own
+    ``name`` attribute with no package.
+
+    Raises
+    ------
+    UnknownAdapterError
+        For a name that is not registered.
+    AdapterLoadError
+        When a registered adapter cannot be loaded, or a class fails to construct.
+    AdapterChoiceError
+        For anything else that is not an adapter, an adapter without a ``name``, or an
+        unregistered class named like a registered adapter.
+    """
+    if isinstance(adapter, str):
+        return get_adapter(adapter)
+    cls = adapter if isinstance(adapter, type) else type(adapter)
+    if not issubclass(cls, Adapter):
+        raise AdapterChoiceError(f"expected an adapter name, an Adapter subclass or an instance "
+                                 f"of one, got {adapter!r}")
+    found = _registration_of(cls)
+    name, package = (found.name, found.package) if found else (adapter.name, "")
+    if not found:
+        _check_own_name(cls, name)
+    if isinstance(adapter, type):
+        try:
+            instance = cls()
+        except Exception as error:  # noqa: BLE001 — the adapter's own code: named
+            raise AdapterLoadError(f"adapter class {class_path(cls)} cannot be constructed: "
+                                   f"{describe(error)}") from error
+    elif (adapter.name, adapter.package) == (name, package):
+        return adapter
+    else:
+        instance = copy.copy(adapter)
+    instance.name, instance.package = name, package
+    return instance
+
+
+def _check_own_name(cls: type, name) -> None:
+    """Raise :class:`AdapterChoiceError` unless ``name`` can name the unregistered ``cls``."""
+    if not isinstance(name, str) or not name:
+        raise AdapterChoiceError(f"adapter class {class_path(cls)} has no name: set its class "
+                                 f"attribute `name` (it names the adapter in rows and campaign "
+                                 f"files)")
+    taken = _discover()[0].get(name)
+    if taken is not None:
+        raise AdapterChoiceError(f"adapter class {class_path(cls)} is named {name!r}, the name "
+                                 f"of the registered {taken.label}; give the class another name")
+
+
+def adapter_source(adapter: Adapter) -> str:
+    """Names ``adapter`` in a reason: its registration's label, or for an unregistered class
+    ``adapter 'mine' (class my_solver:MyAdapter)``."""
+    found = _registration_of(type(adapter))
+    return found.label if found else f"adapter {adapter.name!r} (class {class_path(type(adapter))})"
+
+
+def version_or_problem(adapter: str | type[Adapter] | Adapter) -> tuple[str | None, str]:
+    """(the adapter's ``version()``, ``""``), or (None, why) when the adapter cannot be loaded
+    or its ``version()`` raises; the reason names the adapter and its package.  ``adapter`` is
+    anything :func:`resolve_adapter` takes."""
     try:
-        adapter = get_adapter(name)
+        resolved = resolve_adapter(adapter)
     except AdapterLoadError as error:
         return None, str(error)
     try:
-        return adapter.version(), ""
+        return resolved.version(), ""
     except Exception as error:  # noqa: BLE001 — a broken adapter is reported, not fatal
-        return None, blame(registration(name).label, "version()", error)
+        return None, blame(adapter_source(resolved), "version()", error)
 
 
 def inventory() -> list[dict]:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy
 
-from mbh._adapters import AdapterLoadError, get_adapter
+from mbh._adapters import AdapterLoadError, resolve_adapter
 from mbh._adapters.base import Adapter, UnsupportedCase, blame, describe
 from mbh._harness.model import scenario
 from mbh._harness.run.spec import CaseSpec, main_output
@@ -117,37 +117,50 @@ class CaseWork:
     lives here, not with the campaign runner, because unpickling it imports its module in every
     case's process: the runner's module imports the result store (pandas, pyarrow), which no case
     needs (0.37 s a case).
+
+    Attributes
+    ----------
+    bounds : Bounds
+    accuracy : float
+    adapters : tuple of (str, type or Adapter)
+        Adapters given as a class or an instance rather than registered, by the name their cases
+        carry; each reaches the workers by pickle (a class by its importable name).
     """
 
     bounds: Bounds
     accuracy: float
+    adapters: tuple[tuple[str, type[Adapter] | Adapter], ...] = ()
 
     def __call__(self, spec: CaseSpec) -> tuple[dict, Trajectory | None]:
-        outcome = run_spec(spec, self.bounds, self.accuracy)
+        outcome = run_spec(spec, self.bounds, self.accuracy,
+                           adapter=dict(self.adapters).get(spec.adapter))
         return outcome.row, outcome.trajectory
 
 
-def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
-             mech: Mechanism | None = None) -> CaseResult:
+def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float, mech: Mechanism | None = None,
+             adapter: type[Adapter] | Adapter | None = None) -> CaseResult:
     """Run one case and flatten it into a row.
 
     Parameters
     ----------
     spec : CaseSpec
-    mech : Mechanism, optional
-        The scene, when it was built in Python (:mod:`mbh._harness.model.builder`); loaded from
-        ``spec.scenario`` otherwise.
     bounds : Bounds
         The verdict's bounds.
     accuracy : float
         Threshold on the main output's error (rad or m) for the ``accurate`` column.
+    mech : Mechanism, optional
+        The scene, when it was built in Python (:mod:`mbh._harness.model.builder`); loaded from
+        ``spec.scenario`` otherwise.
+    adapter : Adapter subclass or instance, optional
+        The adapter of ``spec.adapter`` when it is not registered under that name
+        (:func:`mbh._adapters.resolve_adapter`); the registered adapter otherwise.
 
     Returns
     -------
     CaseResult
         With ``row`` set (see the module docstring).  Never raises for engine trouble: that is
-        the row's status.  An adapter that cannot be loaded
-        (:class:`adapters.AdapterLoadError`), and an exception raised outside the engine's run
+        the row's status.  An adapter that cannot be loaded or constructed
+        (:class:`mbh._adapters.AdapterLoadError`), and an exception raised outside the engine's run
         (the adapter's ``version()``, measuring the run), give status ``failed`` with the error as
         the reason (and empty ``metrics``); a third-party adapter's reason names it and its
         package.
@@ -155,7 +168,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float,
     mech = scenario.load(spec.scenario) if mech is None else mech
     reference, reference_column = _load_reference(mech)
     try:
-        adapter = get_adapter(spec.adapter)
+        adapter = resolve_adapter(spec.adapter if adapter is None else adapter)
     except AdapterLoadError as error:
         return _failed(spec, mech, str(error), reference_column)
     try:

@@ -1,6 +1,7 @@
-"""One case from Python: a scene (by name, path or built mechanism), an adapter, a method and a
-step → a :class:`~mbh._harness.run.case.CaseResult` with its status, reason, metrics, trajectory and
-the row a campaign would store (``to_frame()``).
+"""One case from Python: a scene (by name, path or built mechanism), an adapter (registered by
+name, or a class or instance that is not registered), a method and a step → a
+:class:`~mbh._harness.run.case.CaseResult` with its status, reason, metrics, trajectory and the row
+a campaign would store (``to_frame()``).
 
 The inputs are checked before anything runs, with the rules a campaign file's cases obey
 (:mod:`mbh._harness.run.spec`); every problem is named by its argument in one :class:`CaseInputError`.
@@ -12,12 +13,12 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from mbh._adapters import adapter_names, get_adapter
+from mbh._adapters import AdapterChoiceError, adapter_names, resolve_adapter
+from mbh._adapters.base import Adapter, steps_in
 from mbh._harness.common.errors import MbhError
 from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
 from mbh._harness.model import scenario
 from mbh._harness.model.mechanism import Mechanism
-from mbh._adapters.base import steps_in
 from mbh._harness.model.timegrid import steps_per_sample
 from mbh._harness.run.case import CaseResult
 from mbh._harness.run.row import run_spec
@@ -51,7 +52,46 @@ def _checked_step(dt, t_end: float, mech: Mechanism, problems: list[str]) -> Non
                         f"(at most {MAX_STEPS:.0e}); give a larger step")
 
 
-def check_case(mech: Mechanism, adapter: str, method: str, dt, t_end, repetitions=1) -> float:
+def _checked_adapter(adapter, method: str, problems: list[str]) -> Adapter | None:
+    """The adapter ``adapter`` stands for (:func:`mbh._adapters.resolve_adapter`), with ``method``
+    checked by it; None, the problem recorded, when it cannot be had."""
+    if isinstance(adapter, str) and adapter not in adapter_names():
+        problems.append(f"adapter: unknown adapter {adapter!r} (known: "
+                        f"{', '.join(adapter_names())})")
+        return None
+    try:
+        resolved = resolve_adapter(adapter)
+    except AdapterChoiceError as error:
+        problems.append(f"adapter: {error}")
+        return None
+    try:
+        resolved.method_spec(method)
+    except ValueError as error:
+        problems.append(f"method: {error}")
+    return resolved
+
+
+def _checked_case(mech: Mechanism, adapter, method: str, dt, t_end,
+                  repetitions) -> tuple[Adapter, float]:
+    """(the adapter, the end time in s) of a case whose arguments all hold; raises
+    :class:`CaseInputError` with every problem otherwise (see :func:`check_case`)."""
+    problems = []
+    resolved = _checked_adapter(adapter, method, problems)
+    duration = mech.duration if t_end is None else t_end
+    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
+            or not 0 < duration <= mech.duration:
+        problems.append(f"t_end: expected a time in (0, {mech.duration!r}] s, got {t_end!r}")
+    else:
+        _checked_step(dt, float(duration), mech, problems)
+    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
+        problems.append(f"repetitions: expected an integer >= 1, got {repetitions!r}")
+    if problems:
+        raise CaseInputError(problems)
+    return resolved, float(duration)
+
+
+def check_case(mech: Mechanism, adapter: str | type[Adapter] | Adapter, method: str, dt, t_end,
+               repetitions=1) -> float:
     """Check a case's arguments against ``mech`` before anything runs.
 
     Parameters
@@ -70,40 +110,29 @@ def check_case(mech: Mechanism, adapter: str, method: str, dt, t_end, repetition
     ------
     CaseInputError
         With every problem, each naming its argument.
+    AdapterLoadError
+        A registered adapter that cannot be loaded, or a class that fails to construct.
     """
-    problems = []
-    if adapter not in adapter_names():
-        problems.append(f"adapter: unknown adapter {adapter!r} (known: {', '.join(adapter_names())})")
-    else:
-        try:
-            get_adapter(adapter).method_spec(method)
-        except ValueError as error:
-            problems.append(f"method: {error}")
-    duration = mech.duration if t_end is None else t_end
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) \
-            or not 0 < duration <= mech.duration:
-        problems.append(f"t_end: expected a time in (0, {mech.duration!r}] s, got {t_end!r}")
-    else:
-        _checked_step(dt, float(duration), mech, problems)
-    if isinstance(repetitions, bool) or not isinstance(repetitions, int) or repetitions < 1:
-        problems.append(f"repetitions: expected an integer >= 1, got {repetitions!r}")
-    if problems:
-        raise CaseInputError(problems)
-    return float(duration)
+    return _checked_case(mech, adapter, method, dt, t_end, repetitions)[1]
 
 
-def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
-            dt: float = 1e-3, t_end: float | None = None, *, repetitions: int = 1,
-            bounds: Bounds = DEFAULT_BOUNDS, accuracy: float = DEFAULT_ACCURACY) -> CaseResult:
+def run_one(scene: str | Path | Mechanism, adapter: str | type[Adapter] | Adapter,
+            method: str = "best", dt: float = 1e-3, t_end: float | None = None, *,
+            repetitions: int = 1, bounds: Bounds = DEFAULT_BOUNDS,
+            accuracy: float = DEFAULT_ACCURACY) -> CaseResult:
     """Run one case against the scene's verified reference (built on first use) and measure it.
 
     Parameters
     ----------
     scene : str, Path or Mechanism
         A shipped scenario name, a scenario file, or a mechanism built in Python
-        (:class:`mbh._harness.model.builder.MechanismBuilder`).
-    adapter : str
-        Adapter name (``mbh adapters``).
+        (:class:`mbh.MechanismBuilder`).
+    adapter : str, Adapter subclass or Adapter
+        A registered adapter's name (``mbh adapters``), or your own adapter as a class
+        (instantiated without arguments) or an instance, registered or not
+        (:mod:`mbh.adapters`).  Its case is judged and its row built exactly as a registered
+        adapter's; the row's ``adapter`` is the adapter's ``name`` (a registered class's: its
+        registered name).
     method : str
         Method string ``NAME[:key=value,...]`` (``mbh methods --adapter NAME``).
     dt : float
@@ -127,10 +156,14 @@ def run_one(scene: str | Path | Mechanism, adapter: str, method: str = "best",
     ScenarioError
         The scene does not load (every problem, naming the file and field).
     CaseInputError
-        Any other argument is invalid (every problem, naming the argument).
+        Any other argument is invalid (every problem, naming the argument); an adapter class or
+        instance without a ``name``, or named like another registered adapter, is one.
+    AdapterLoadError
+        A registered adapter that cannot be loaded, or an adapter class that fails to construct
+        (the message names it).
     """
     mech = scene if isinstance(scene, Mechanism) else scenario.load(scene)
-    duration = check_case(mech, adapter, method, dt, t_end, repetitions)
+    resolved, duration = _checked_case(mech, adapter, method, dt, t_end, repetitions)
     name = mech.name if isinstance(scene, Mechanism) else str(scene)
-    spec = CaseSpec(name, adapter, method, float(dt), duration, repetitions)
-    return run_spec(spec, bounds, accuracy, mech=mech)
+    spec = CaseSpec(name, resolved.name, method, float(dt), duration, repetitions)
+    return run_spec(spec, bounds, accuracy, mech=mech, adapter=resolved)
