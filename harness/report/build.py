@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import os
+import shlex
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,7 +25,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from mbh._harness.common.locations import checkout, user_data
+from mbh._harness.common.locations import shipped
 from mbh._harness.model import scenario as scenarios
 from mbh._harness.store.reference_files import stored_reference
 from mbh._harness.report import failures, figures, mechanism, seed_compare, summary
@@ -32,6 +33,7 @@ from mbh._harness.report.summary import Table
 from mbh._harness.model.scenario import ScenarioError
 from mbh._harness.measure.verdict import DEFAULT_ACCURACY
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
+from mbh._harness.store.location import root_or_default
 from mbh._harness.store.manifest import latest_run
 from mbh._harness.store.runs import RunStore
 from mbh._harness.common.errors import MbhError
@@ -104,11 +106,30 @@ class Report:
         self.omitted.setdefault(section, []).append(why)
 
 
-def reports_root() -> Path:
-    """Where ``mbh report`` writes by default: ``reports`` in the checkout the harness runs from,
-    else in the user data folder."""
-    repository = checkout()
-    return (repository if repository is not None else user_data()) / "reports"
+def reports_root(root: Path | None = None) -> Path:
+    """Where ``mbh report`` and ``mbh history`` write by default: ``reports`` in the results root
+    ``root`` (default :func:`~mbh._harness.store.location.results_root`: ``$MBH_RESULTS_DIR``,
+    else ``results`` in a checkout, else in the user data folder)."""
+    return root_or_default(root) / "reports"
+
+
+def reproduce_commands(manifest: dict, against: str | None = None,
+                       root: Path | None = None) -> str:
+    """The commands that make the run of ``manifest`` again and build this report of it.
+
+    The campaign is named as ``mbh run`` takes it: by its name when the run was made from the
+    shipped campaign file of that name, else by the file's path as the manifest stores it
+    (``campaign_path``: as it was given, so a relative path holds from the folder the run was
+    made in).  ``--root`` is added when the report was built from a results root given as one.
+    """
+    name = manifest.get("campaign", "")
+    stored = manifest.get("campaign_path")
+    shipped_file = shipped("campaigns") / f"{name}.toml"
+    source = name if not stored or Path(stored).resolve() == shipped_file.resolve() else stored
+    root_option = f" --root {shlex.quote(str(root))}" if root is not None else ""
+    report = f"mbh report {manifest['run_id']}" + (f" --against {against}" if against else "")
+    return (f"mbh run {shlex.quote(str(source))}{root_option}   # made run {manifest['run_id']}\n"
+            f"{report}{root_option}")
 
 
 def parse_formats(text: str) -> tuple[str, ...]:
@@ -310,11 +331,10 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
     accuracy = _campaign_accuracy(manifest)
     calibration = store.calibration_s
     names = sorted(cases["scenario"].dropna().unique()) if len(cases) else []
-    command = f"mbh report {run_id}" + (f" --against {against}" if against else "")
     report = Report(
         run_id=run_id, campaign=manifest.get("campaign", ""), run_status=manifest.get("status", ""),
         against=against, built_at=built_at or build_time(),
-        command=f"mbh run {manifest.get('campaign', '')}   # made run {run_id}\n{command}",
+        command=reproduce_commands(manifest, against, root),
         accuracy=accuracy, scenarios=names,
         fastest=[summary.fastest_table(cases, name, calibration) for name in names]
         + [summary.front_ratio_table(cases, name) for name in names if _has_front(cases, name)],
@@ -390,7 +410,8 @@ def _has_front(cases, scenario: str) -> bool:
 def build_report(run_id: str, against: str | None = None, formats=FORMATS,
                  out: Path | None = None, root: Path | None = None,
                  built_at: str | None = None) -> dict[str, Path]:
-    """Write the report of run ``run_id`` into ``out`` (default ``reports/<run_id>/``).
+    """Write the report of run ``run_id`` into ``out`` (default ``<root>/reports/<run_id>/``,
+    :func:`reports_root`).
 
     Parameters
     ----------
@@ -414,7 +435,7 @@ def build_report(run_id: str, against: str | None = None, formats=FORMATS,
         campaign = _open(run_id, root).manifest["campaign"]
         against = latest_run(campaign, root, before=run_id)
     report = collect(run_id, against, root, built_at)
-    out = Path(out) if out is not None else reports_root() / run_id
+    out = Path(out) if out is not None else reports_root(root) / run_id
     out.mkdir(parents=True, exist_ok=True)
     written = {}
     if "pdf" in formats:

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from mbh._harness.common.locations import checkout
 from mbh._harness.report.build import _asset, _environment_for_template, build_time, reports_root
 from mbh._harness.report.history import (QUANTITIES, STATUS, History, find_changes, load_history,
                                     version_changes)
@@ -28,10 +29,6 @@ __all__ = ["HistoryPage", "TrendView", "collect_history", "render_history", "bui
 
 #: File name of the page in its folder.
 HISTORY_FILE = "history.html"
-#: Where :func:`report_link` looks for a run's report: under the run folder (``mbh nightly``),
-#: then under the reports folder (``mbh report``).
-_REPORT_PLACES = (lambda root, run: root / run / "report" / "report.html",
-                  lambda root, run: reports_root() / run / "report.html")
 
 
 @dataclass(frozen=True)
@@ -65,11 +62,21 @@ class HistoryPage:
         return sorted({view.adapter for view in self.trends})
 
 
+def _report_places(run_id: str, root: Path) -> list[Path]:
+    """Where a report of run ``run_id`` under ``root`` is written: in the run folder
+    (``mbh nightly``), in the results root's reports folder (``mbh report``) and, in a checkout,
+    in its ``reports`` folder (``make report``)."""
+    places = [root / run_id / "report" / "report.html", reports_root(root) / run_id / "report.html"]
+    repository = checkout()
+    if repository is not None:
+        places.append(repository / "reports" / run_id / "report.html")
+    return places
+
+
 def report_link(run_id: str, root: Path, page_folder: Path) -> str | None:
     """The path of run ``run_id``'s HTML report relative to ``page_folder``, or None when no
     report of it was built."""
-    for place in _REPORT_PLACES:
-        path = place(root, run_id)
+    for path in _report_places(run_id, root):
         if path.is_file():
             return Path(os.path.relpath(path, page_folder)).as_posix()
     return None
@@ -144,7 +151,7 @@ def build_history(campaign: str | None = None, root: Path | None = None,
                   history: History | None = None,
                   changes: pd.DataFrame | None = None) -> Path:
     """Write the history page of ``campaign`` into ``out`` (default
-    ``reports/history-<campaign>/``) and return its path.
+    ``<results root>/reports/history-<campaign>/``, :func:`reports_root`) and return its path.
 
     Raises
     ------
@@ -152,7 +159,7 @@ def build_history(campaign: str | None = None, root: Path | None = None,
         When the root holds no finished run of the campaign.
     """
     history = history if history is not None else load_history(campaign, root)
-    folder = Path(out) if out is not None else reports_root() / f"history-{history.campaign}"
+    folder = Path(out) if out is not None else reports_root(root) / f"history-{history.campaign}"
     folder.mkdir(parents=True, exist_ok=True)
     page = collect_history(history.campaign, root, folder, built_at, history, changes)
     path = folder / HISTORY_FILE
