@@ -5,7 +5,8 @@ It shows the runs (commit, calibration, engine versions, a link to each run's re
 was built), the changes :func:`mbh._harness.report.history.find_changes` found (open regressions
 first, each linking to the report of its first run), and one trend figure
 (:func:`mbh._harness.report.history_figures.trend_figure`) per scenario × engine × method family,
-with filters by scenario, engine and "changed only".
+with filters by scenario, engine and "changed only".  A campaign with a single finished run has
+no history yet: the page says so and draws no figure.
 """
 
 from __future__ import annotations
@@ -52,6 +53,11 @@ class HistoryPage:
     changes: list[dict]
     trends: list[TrendView]
     command: str
+
+    @property
+    def single_run(self) -> bool:
+        """Whether the campaign has one finished run only (no history to show yet)."""
+        return len(self.runs) < 2
 
     @property
     def scenarios(self) -> list[str]:
@@ -104,6 +110,22 @@ def _change_rows(changes: pd.DataFrame, links: dict[str, str | None]) -> list[di
     return rows
 
 
+def _trends(history: History, changes: pd.DataFrame) -> list[TrendView]:
+    """One trend figure per scenario × engine × method family of ``history``."""
+    upgrades = version_changes(history)
+    cases = history.cases.assign(family=history.cases["method"].map(method_family))
+    changes = changes.assign(family=changes["method"].map(method_family))
+    trends = []
+    for (scenario, adapter, family), group in cases.groupby(["scenario", "adapter", "family"],
+                                                            sort=True):
+        mine = changes[(changes["scenario"] == scenario) & (changes["adapter"] == adapter)
+                       & (changes["family"] == family)]
+        title = f"{scenario} · {adapter} · {family}"
+        trends.append(TrendView(scenario, adapter, family, not mine.empty, trend_figure(
+            title, history.runs, group, mine, upgrades[upgrades["adapter"] == adapter])))
+    return trends
+
+
 def collect_history(campaign: str | None = None, root: Path | None = None,
                     page_folder: Path | None = None, built_at: str | None = None,
                     history: History | None = None,
@@ -122,17 +144,7 @@ def collect_history(campaign: str | None = None, root: Path | None = None,
     runs = [{**run, "index": index, "versions": versions.get(index, ""),
              "link": links[run["run_id"]]}
             for index, run in enumerate(history.runs.drop(columns="packages").to_dict("records"))]
-    upgrades = version_changes(history)
-    cases = history.cases.assign(family=history.cases["method"].map(method_family))
-    changes = changes.assign(family=changes["method"].map(method_family))
-    trends = []
-    for (scenario, adapter, family), group in cases.groupby(["scenario", "adapter", "family"],
-                                                            sort=True):
-        mine = changes[(changes["scenario"] == scenario) & (changes["adapter"] == adapter)
-                       & (changes["family"] == family)]
-        title = f"{scenario} · {adapter} · {family}"
-        trends.append(TrendView(scenario, adapter, family, not mine.empty, trend_figure(
-            title, history.runs, group, mine, upgrades[upgrades["adapter"] == adapter])))
+    trends = _trends(history, changes) if len(runs) > 1 else []  # one run: no trend yet
     root_option = f" --root {root}" if root is not None else ""
     return HistoryPage(campaign=history.campaign, built_at=built_at or build_time(), runs=runs,
                        changes=_change_rows(changes, links), trends=trends,

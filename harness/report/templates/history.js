@@ -6,6 +6,7 @@
   var changed = document.getElementById("filter-changed");
   var count = document.getElementById("trend-count");
   var figures = document.querySelectorAll("#trend-figures figure");
+  if (!scenario) { return; }  // a single run: no figures, no filters
   function apply() {
     var shown = 0;
     Array.prototype.forEach.call(figures, function (figure) {
