@@ -26,7 +26,8 @@ from typing import Any, Iterator
 import numpy as np
 
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.model.scenario import Problem, ScenarioError, _join, _key_text, from_document
+from mbh._harness.model.scenario import ScenarioError, from_document
+from mbh._harness.model.toml_fields import Problem, _join, _key_text
 
 #: Deepest nesting of lists and tables a built document may have; a scenario's deepest field,
 #: ``initial.velocities[i].location``, is 4 deep.

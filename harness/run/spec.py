@@ -22,7 +22,7 @@ from mbh._adapters.base import Adapter, steps_in
 from mbh._harness.model import scenario
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.timegrid import steps_per_sample
-from mbh._harness.model.scenario import Problem, _Collector, _join, finite_number, read_toml
+from mbh._harness.model.toml_fields import Problem, _Collector, _join, finite_number, read_toml
 from mbh._harness.measure.verdict import DEFAULT_ACCURACY, DEFAULT_BOUNDS, Bounds
 from mbh._harness.common.errors import MbhError
 from mbh._harness.common.locations import shipped

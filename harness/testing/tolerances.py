@@ -38,7 +38,7 @@ from mbh._harness.run.spec import CaseSpec, main_output
 from mbh._harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
 from mbh._harness.measure.energy import energy_balance, energy_scale
 from mbh._harness.measure.metrics import lever_length, violation_series
-from mbh._harness.model.scenario import finite_number, read_toml
+from mbh._harness.model.toml_fields import finite_number, read_toml
 from mbh._harness.model.trajectory import STATUSES
 
 #: Keys a tolerance entry may hold.

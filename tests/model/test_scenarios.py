@@ -12,7 +12,8 @@ from mbh._harness import cli
 from mbh._harness.model import scenario
 from mbh._harness.model.mechanism import PrescribedJointRate, PrescribedPointVelocity
 from mbh._harness.model.outputs import output_series
-from mbh._harness.model.scenario import ScenarioError, inertia_problem
+from mbh._harness.model.scenario import ScenarioError
+from mbh._harness.model.scenario_bodies import inertia_problem
 from mbh._harness.model.trajectory import Trajectory
 
 BAD = """
