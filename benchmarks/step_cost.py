@@ -4,11 +4,11 @@ Run:  .venv/bin/python benchmarks/step_cost.py
 
 For rk4+baumgarte and rk4+direct on fourbar and slider_crank it prints the wall time per step of
 the compiled loop alone (``Adapter.bare_loop``, best of five 1 s runs at dt = 1e-3), with the
-generated functions (``loop=generated``, :mod:`mbh._adapters.inhouse.generated`) and with the generic
+generated functions (``loop=generated``, :mod:`mbh._adapters.inhouse.codegen.generated`) and with the generic
 kernels (``loop=compiled``), then the cost of one call of each piece of a right-hand side at the
 assembled state, each timed inside a compiled loop (so without Python's call overhead): Φ_q, γ,
 the forces Q_e + Q_v, the projection of ``direct`` (Rouvinen 2003, eq. 127 and 137) and the whole fused
-acceleration (:func:`~mbh._adapters.inhouse.dynamics.index1_acceleration`: the pieces plus the mass
+acceleration (:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`: the pieces plus the mass
 matrix solve), the last two by the kernels and by the generated functions.  RK4 makes four
 right-hand sides and one projection per step.  Numbers are measured on the machine that runs the
 script; nothing here is asserted.
@@ -23,10 +23,12 @@ from numba import njit
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunGrid
-from mbh._adapters.inhouse import kernels
-from mbh._adapters.inhouse.compiled import COUNTERS, _project
-from mbh._adapters.inhouse.dynamics import forces_kernel, index1_acceleration
-from mbh._adapters.inhouse.generated import ACCELERATION, NOTHING
+from mbh._adapters.inhouse.bodies import kernels
+from mbh._adapters.inhouse.stepping.kernel_step import project_state
+from mbh._adapters.inhouse.stepping.loop_codes import COUNTERS
+from mbh._adapters.inhouse.formulations.dynamics import index1_acceleration
+from mbh._adapters.inhouse.formulations.mass_and_forces import forces_kernel
+from mbh._adapters.inhouse.codegen.generated import ACCELERATION, NOTHING
 from mbh._harness.model import scenario
 
 CASES = [("fourbar", "rk4+baumgarte"), ("fourbar", "rk4+direct"),
@@ -59,10 +61,10 @@ def _calls(piece, q, v, rows, constraint_args, dynamics_args, sparsity_arrays, f
         elif piece == 2:
             total += forces_kernel(q, v, *dynamics_args)[0]
         elif piece == 3:
-            total += _project(q, v, 0.0, rows, 1e-12, 10, 1e-10, constraint_args,
+            total += project_state(q, v, 0.0, rows, 1e-12, 10, 1e-10, constraint_args,
                               sparsity_arrays, NOTHING, counters)[0][0]
         elif piece == 4:
-            total += _project(q, v, 0.0, rows, 1e-12, 10, 1e-10, constraint_args,
+            total += project_state(q, v, 0.0, rows, 1e-12, 10, 1e-10, constraint_args,
                               sparsity_arrays, functions, counters)[0][0]
         elif piece == 5:
             total += index1_acceleration(q, v, 0.0, 0.0, 0.0, rows, constraint_args,

@@ -240,15 +240,15 @@ def test_the_layer_rule_refuses_upward_and_sideways_imports():
 
 def test_the_checker_sees_every_kind_of_violation():
     # The rules themselves, on the four forbidden patterns and their allowed neighbours.
-    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.inhouse.constraints")
-    assert violation("mbh._adapters.integrators.base", "mbh._adapters.inhouse.linalg.solve")
-    assert violation("mbh._harness.measure.metrics", "mbh._adapters.inhouse.states.body_states")
+    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.inhouse.bodies.constraints")
+    assert violation("mbh._adapters.integrators.base", "mbh._adapters.inhouse.numerics.linalg.solve")
+    assert violation("mbh._harness.measure.metrics", "mbh._adapters.inhouse.bodies.states.body_states")
     assert violation("mbh._harness.cli", "mbh._adapters.mujoco_adapter.export_mjcf")
     assert violation("mbh._harness.cli", "mbh._adapters.integrators.make_integrator")
-    assert violation("mbh._adapters.inhouse.stabilisation", "mbh._harness.measure.energy.mechanical_energy")
+    assert violation("mbh._adapters.inhouse.formulations.stabilisation", "mbh._harness.measure.energy.mechanical_energy")
     assert violation("mbh._adapters.mujoco_adapter.build", "mbh._harness.model.outputs")
     assert violation("mbh._adapters.mujoco_adapter.build", "mbh._adapters.pybullet_adapter.quiet")
-    assert violation("mbh._adapters.inhouse.adapter", "mbh._adapters.inhouse.driver") is None
+    assert violation("mbh._adapters.inhouse.adapter", "mbh._adapters.inhouse.stepping.driver") is None
     assert violation("mbh._harness.cli", "mbh._adapters.get_adapter") is None
     assert violation("mbh._harness.cli", "mbh._adapters.base.UnsupportedCase") is None
     assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.integrators.RUNNING") is None
@@ -267,3 +267,33 @@ def test_relative_and_function_level_imports_are_resolved(tmp_path, monkeypatch)
     found = list(imports(package / "x.py"))
     assert found[0][:2] == (2, "mbh._adapters.inhouse.kernels")
     assert found[1][:2] == (3, "mbh._harness.measure.energy")
+
+
+#: The in-house formulation's tiers, bottom first (adapters/inhouse/<tier>/): a module may import
+#: its own tier and the tiers below, never one above; the adapter module sits on top of them all.
+INHOUSE_TIERS = ("numerics", "bodies", "formulations", "codegen", "stepping")
+
+
+def inhouse_tier(name: str) -> int | None:
+    """The rank of the in-house tier module ``name`` lies in, or None outside the tiers."""
+    parts = name.split(".")
+    if parts[:3] != ["mbh", "_adapters", "inhouse"] or len(parts) < 4:
+        return None
+    return INHOUSE_TIERS.index(parts[3]) if parts[3] in INHOUSE_TIERS else None
+
+
+def test_the_inhouse_tiers_import_only_downward():
+    found = []
+    for path in sorted((ROOT / "adapters" / "inhouse").rglob("*.py")):
+        importer = module_name(path)
+        own = inhouse_tier(importer)
+        for line, imported, written in imports(path):
+            other = inhouse_tier(imported)
+            if own is not None and other is not None and other > own:
+                found.append(f"{path.relative_to(ROOT)}:{line}: {written} "
+                             f"({INHOUSE_TIERS[own]} may not import {INHOUSE_TIERS[other]})")
+    assert not found, "\n".join(found)
+    assert all((ROOT / "adapters" / "inhouse" / tier / "__init__.py").is_file()
+               for tier in INHOUSE_TIERS)
+    assert inhouse_tier("mbh._adapters.inhouse.stepping.compiled") == 4
+    assert inhouse_tier("mbh._adapters.inhouse.adapter") is None

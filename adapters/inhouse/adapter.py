@@ -8,9 +8,9 @@ Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning
 one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition``, and linear multistep
 methods with ``none``, ``baumgarte`` or ``direct``, run compiled, with functions generated for
 the mechanism (``loop=auto``, the default, or ``generated``;
-:mod:`mbh._adapters.inhouse.compiled_stepper`), with the generic kernels (``loop=compiled``) or
+:mod:`mbh._adapters.inhouse.stepping.compiled_stepper`), with the generic kernels (``loop=compiled``) or
 stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
-methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.compiled_multistep`).
+methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`).
 """
 
 from __future__ import annotations
@@ -21,12 +21,13 @@ import time
 import numpy as np
 
 from mbh._adapters.base import Adapter, MethodSpec, RunGrid, Stepper, UnsupportedCase, parse_method
-from mbh._adapters.inhouse.compiled_stepper import LOOPS, CompiledStepper, has_compiled_path
-from mbh._adapters.inhouse.driver import InhouseStepper
+from mbh._adapters.inhouse.stepping.compiled_stepper import (
+    LOOPS, CompiledStepper, has_compiled_path)
+from mbh._adapters.inhouse.stepping.driver import InhouseStepper
 from mbh._adapters.integrators import integrator_class, integrator_names, integrator_params
-from mbh._adapters.inhouse.newton_euler import NewtonEuler
-from mbh._adapters.inhouse.partition import CoordinatePartitioning
-from mbh._adapters.inhouse.stabilisation import STRATEGIES
+from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
+from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
+from mbh._adapters.inhouse.formulations.stabilisation import STRATEGIES
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
 
@@ -37,8 +38,8 @@ FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitionin
 DEFAULT_METHOD = "rk4+baumgarte"
 #: The most accurate fixed-step setting: RK4 with position and velocity projection, Newton to
 #: round-off (near a singular position a residual ε leaves the state ~ε/ψ off the branch, see
-#: :class:`~mbh._adapters.inhouse.stabilisation.DirectCorrection`), singular positions passed by placed
-#: steps (:mod:`mbh._adapters.inhouse.fold`).
+#: :class:`~mbh._adapters.inhouse.formulations.stabilisation.DirectCorrection`), singular positions passed by placed
+#: steps (:mod:`mbh._adapters.inhouse.formulations.fold`).
 BEST_METHOD = "rk4+direct:proj_tol=1e-15"
 ALIASES = {"default": DEFAULT_METHOD, "best": BEST_METHOD}
 
@@ -57,7 +58,7 @@ def _split(name: str) -> tuple[str, str]:
 
 def _spec(integrator: str, strategy: str) -> MethodSpec:
     """The method ``integrator+strategy`` with the parameters of both parts; methods with a
-    compiled path add ``loop`` (:data:`~mbh._adapters.inhouse.compiled_stepper.LOOPS`: ``auto``, the
+    compiled path add ``loop`` (:data:`~mbh._adapters.inhouse.stepping.compiled_stepper.LOOPS`: ``auto``, the
     default, ``generated``, ``compiled`` or ``python``)."""
     formulation = FORMULATIONS[strategy]
     params = {**integrator_params(integrator), **formulation.defaults}
@@ -80,7 +81,7 @@ class InhouseAdapter(Adapter):
                  MethodSpec("best", f"alias of {BEST_METHOD}")]
         for integrator, strategy in itertools.product(integrator_names(), FORMULATIONS):
             specs.append(_spec(integrator, strategy))
-        from mbh._adapters.inhouse.dae import ida_params
+        from mbh._adapters.inhouse.formulations.dae import ida_params
         specs.append(MethodSpec("ida", "SUNDIALS IDA (scikit-sundae) on the DAE", ida_params()))
         return specs
 
@@ -91,7 +92,7 @@ class InhouseAdapter(Adapter):
                 raise ValueError(f"the alias {name!r} takes no parameters; use {ALIASES[name]}")
             return self.method_spec(ALIASES[name])
         if name == "ida":
-            from mbh._adapters.inhouse.dae import ida_params
+            from mbh._adapters.inhouse.formulations.dae import ida_params
             spec = MethodSpec("ida", "SUNDIALS IDA on the DAE", ida_params())
             return spec, spec.resolve(given)
         spec = _spec(*_split(name))
@@ -105,7 +106,7 @@ class InhouseAdapter(Adapter):
         parameters) and the Φ rows of the joints (with the Euler-parameter normalisations), the
         redundant ones from the rank analysis at the common start
         (:func:`.kinematics.rank_report`, full-pivot elimination of Φ_q)."""
-        from mbh._adapters.inhouse.kinematics import common_start, rank_report
+        from mbh._adapters.inhouse.bodies.kinematics import common_start, rank_report
 
         report = rank_report(model, common_start(model).q)
         return {"coordinates": report.n_coordinates, "constraint_equations": report.n_equations,
@@ -123,7 +124,7 @@ class InhouseAdapter(Adapter):
             raise ValueError(f"parameter 'loop' of {spec.name!r} must be one of "
                              f"{', '.join(LOOPS)}, got {params['loop']!r}")
         if spec.name == "ida":
-            from mbh._adapters.inhouse.dae import check_ida_params
+            from mbh._adapters.inhouse.formulations.dae import check_ida_params
             check_ida_params(params)
 
     def bare_loop(self, model: Mechanism, method: str, dt: float, n_steps: int) -> float:
@@ -158,13 +159,13 @@ class InhouseAdapter(Adapter):
 
 
 class _IdaStepper(Stepper):
-    """SUNDIALS IDA on the DAE of motion (:mod:`mbh._adapters.inhouse.dae`) from the assembled state;
+    """SUNDIALS IDA on the DAE of motion (:mod:`mbh._adapters.inhouse.formulations.dae`) from the assembled state;
     samples from IDA's interpolant, failures at the last step IDA completed."""
 
     def __init__(self, mech: Mechanism, params: dict, grid: RunGrid):
-        from mbh._adapters.inhouse.constraints import layout_of
-        from mbh._adapters.inhouse.dae import DaeModel, IdaIntegration
-        from mbh._adapters.inhouse.kinematics import common_start
+        from mbh._adapters.inhouse.bodies.constraints import layout_of
+        from mbh._adapters.inhouse.formulations.dae import DaeModel, IdaIntegration
+        from mbh._adapters.inhouse.bodies.kinematics import common_start
 
         super().__init__()
         assembly = common_start(mech)
@@ -182,7 +183,7 @@ class _IdaStepper(Stepper):
             self.t_good = self.integration.t
 
     def _states(self, t: float) -> BodyStates:
-        from mbh._adapters.inhouse.states import body_states
+        from mbh._adapters.inhouse.bodies.states import body_states
 
         n = self.integration.model.n
         y = self.integration.state_at(t)

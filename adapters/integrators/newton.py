@@ -69,7 +69,7 @@ def problem_jacobian(owner, t, y, a0):
 
 def non_convergence(max_iter: int, tol: float, t: float) -> str:
     """Why a step failed when Newton's iteration toward t (s) did not converge, as both stepping
-    paths word it (:class:`NewtonSolver`, :mod:`mbh._adapters.inhouse.compiled_multistep`)."""
+    paths word it (:class:`NewtonSolver`, :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`)."""
     return f"Newton iteration did not converge in {max_iter} iterations to tol={tol:g} at t={t:.6g}"
 
 

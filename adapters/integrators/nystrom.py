@@ -237,7 +237,7 @@ class NystromIntegrator(Integrator):
     def step_through(self, ends, steps: int) -> str:
         """Steps of this method ending at the times ``ends`` (s, increasing, the last on the grid
         ``steps`` grid steps on), each projected and checked as :meth:`step` does; together they
-        count as ``steps`` steps (a placed passage, :mod:`mbh._adapters.inhouse.fold`).  A failure
+        count as ``steps`` steps (a placed passage, :mod:`mbh._adapters.inhouse.formulations.fold`).  A failure
         leaves the state at the grid point before them.
 
         Returns
@@ -399,7 +399,7 @@ class RK8(NystromIntegrator):
     Through singular passages its error grows as the step shrinks: its twelve stages probe the
     configuration close to a fold, where the index-1 accelerations grow like the inverse of
     Φ_q's smallest singular value.  On the plain grid it can lose to rk4 by orders of magnitude
-    there; placed passages (:mod:`mbh._adapters.inhouse.fold`) with proj_tol 1e-15 bring it back to
+    there; placed passages (:mod:`mbh._adapters.inhouse.formulations.fold`) with proj_tol 1e-15 bring it back to
     ~1e-10 m on double_fourbar.  Away from folds it is the most accurate method per cost.  The
     figures and the commands that reproduce them: docs/measurements.md, "rk8 through singular
     passages".

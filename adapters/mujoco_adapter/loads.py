@@ -9,7 +9,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from mbh._harness.model.mechanism import GROUND, BodyForce, BodyTorque, Joint, JointActuation, Mechanism
+from mbh._harness.model.mechanism import (GROUND, BodyForce, BodyTorque, Joint, JointActuation,
+                                          Mechanism)
 from mbh._harness.model.topology import SpanningTree
 
 

@@ -16,7 +16,8 @@ import numpy as np
 from mbh._adapters.pybullet_adapter.build import PybulletModel
 from mbh._adapters.pybullet_adapter.quiet import pybullet
 from mbh._adapters.pybullet_adapter.state import _link_poses, _Pose, _poses, _read_states
-from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism,
+                                          SpringDamper)
 from mbh._harness.model.trajectory import BodyStates
 
 

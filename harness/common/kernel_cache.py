@@ -13,7 +13,7 @@ puts :class:`KernelCacheLocator` first among numba's cache locators, which place
   folder, compiled afresh (minutes, once); going back to the old code finds the old folder.  The
   :data:`KEEP` folders used last stay, older ones are removed;
 * the cache of a generated function (under :func:`mbh._harness.common.locations.generated_cache`)
-  beside its source, so that an entry of :mod:`mbh._adapters.inhouse.generated_store` is one folder.
+  beside its source, so that an entry of :mod:`mbh._adapters.inhouse.codegen.generated_store` is one folder.
 
 A kernel is compiled by one process at a time: a process that misses it in the cache takes the
 kernel's lock file (``locks/`` in the fingerprint folder, :mod:`mbh._harness.common.file_lock`) and

@@ -70,7 +70,7 @@ def user_cache() -> Path:
 
 
 def generated_cache() -> Path:
-    """The folder of the generated functions (:mod:`mbh._adapters.inhouse.generated`):
+    """The folder of the generated functions (:mod:`mbh._adapters.inhouse.codegen.generated`):
     ``$MBH_GENERATED_DIR``, else ``generated`` in :func:`user_cache`."""
     configured = os.environ.get(GENERATED_ENV)
     return Path(configured) if configured else user_cache() / "generated"

@@ -32,9 +32,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper,
-                           characteristic_length)
-from mbh._harness.model.outputs import body_frame, body_rotations, joint_angle, joint_slide, wrap_angle
+from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism,
+                                          SpringDamper, characteristic_length)
+from mbh._harness.model.outputs import (body_frame, body_rotations, joint_angle, joint_slide,
+                                        wrap_angle)
 from mbh._harness.model.timegrid import reference_indices
 from mbh._harness.model.trajectory import BodyStates, Trajectory
 from mbh._harness.measure.per_reference import per_reference, read_only

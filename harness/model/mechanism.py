@@ -44,6 +44,15 @@ DRIVABLE = {"revolute": "angle", "prismatic": "distance", "translational": "dist
             "cylindrical": "angle"}
 
 
+
+def grubler_mobility(mech: "Mechanism") -> int:
+    """Chebyshev–Grübler–Kutzbach mobility of ``mech``: 6 per spatial body (3 per planar body)
+    less the freedoms its joints remove (Frączek & Wojtyra 2009, eq. 1.39 / 1.40).  A count on
+    the model, blind to redundant equations and to the actual geometry."""
+    if mech.planar:
+        return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
+    return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)
+
 @dataclass(frozen=True)
 class Body:
     """A rigid body.

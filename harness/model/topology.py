@@ -37,7 +37,8 @@ from itertools import combinations
 
 import numpy as np
 
-from mbh._harness.model.mechanism import GROUND, PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Joint, Mechanism
+from mbh._harness.model.mechanism import (GROUND, PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Joint,
+                                          Mechanism)
 
 #: Largest number of candidate cut sets :func:`spanning_tree` enumerates (about 1 s of search).
 EXHAUSTIVE_LIMIT = 20_000

@@ -25,7 +25,8 @@ import scipy.linalg
 from scipy.spatial.transform import Rotation
 
 from mbh._harness.neutral.equations import JointEquations, body_twists, point_velocity_jacobian
-from mbh._harness.model.mechanism import DRIVABLE, Mechanism, PrescribedJointRate, PrescribedPointVelocity
+from mbh._harness.model.mechanism import (DRIVABLE, Mechanism, PrescribedJointRate,
+                                          PrescribedPointVelocity)
 from mbh._harness.neutral.mobility import CONDITION_LIMIT, RankReport, rank_analysis
 from mbh._harness.model.trajectory import BodyStates
 from mbh._harness.common.errors import MbhError

@@ -41,7 +41,8 @@ from scipy.spatial.transform import Rotation
 
 from mbh._harness.neutral.equations import JointEquations, body_twists
 from mbh._harness.model.outputs import body_rotations
-from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism,
+                                          SpringDamper)
 from mbh._harness.model.trajectory import BodyStates
 
 #: Time step h (s) of the central differences that give Ġ ν: truncation h⁶/140 times the seventh

@@ -19,10 +19,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mbh._harness.neutral.equation_kernels import (combined_rows, compiled, cross, dot, jacobian, jacobian_of,
-                                   residuals, rotations, row_gradients, row_rates,
-                                   velocity_residuals, world_vector, wrap)
-from mbh._harness.model.mechanism import BodyForce, BodyTorque, JointActuation, Mechanism, SpringDamper
+from mbh._harness.neutral.equation_kernels import (combined_rows, compiled, cross, dot, jacobian,
+                                                   jacobian_of, residuals, rotations, row_gradients,
+                                                   row_rates, velocity_residuals, world_vector,
+                                                   wrap)
+from mbh._harness.model.mechanism import (BodyForce, BodyTorque, JointActuation, Mechanism,
+                                          SpringDamper)
 
 _LOAD_FORCE, _LOAD_TORQUE, _LOAD_AXIS_TORQUE, _LOAD_AXIS_FORCE, _LOAD_SPRING = 0, 1, 2, 3, 4
 _TORQUE_JOINTS = ("revolute", "cylindrical")

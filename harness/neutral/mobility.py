@@ -23,7 +23,7 @@ import numpy as np
 import scipy.linalg
 
 from mbh._harness.neutral.equations import JointEquations
-from mbh._harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
+from mbh._harness.model.mechanism import Mechanism, grubler_mobility
 
 #: A pivot |R_kk| of the QR factorisation of Jᵀ below this fraction of the largest counts as zero.
 #: Round-off puts dependent rows' pivots at ~1e-16·|J| (≤ 1e-15 on the shipped scenes' redundant
@@ -42,13 +42,6 @@ CONDITION_LIMIT = 1e6
 #: are at round-off (~1e-16), dependent rows at ≥ 1/√30 ≈ 0.18 on the shipped scenes (figures:
 #: docs/measurements.md, section "Assembly and rank analysis").
 DEPENDENCE_TOLERANCE = 1e-9
-
-
-def grubler_mobility(mech: Mechanism) -> int:
-    """Chebyshev–Grübler–Kutzbach mobility (Frączek & Wojtyra 2009, eq. 1.39 / 1.40)."""
-    if mech.planar:
-        return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
-    return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)
 
 
 def dependent_rows(matrix: np.ndarray, rank: int, tol: float = DEPENDENCE_TOLERANCE) -> np.ndarray:

@@ -53,7 +53,8 @@ import time
 
 import numpy as np
 
-from mbh._harness.references.routes import ROUTE_TOLERANCE, BranchRouteError, full_route, reduced_route
+from mbh._harness.references.routes import (ROUTE_TOLERANCE, BranchRouteError, full_route,
+                                            reduced_route)
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.outputs import output_series
 from mbh._harness.model.timegrid import GRID_STEP

@@ -55,8 +55,8 @@ from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
                                       UNIQUENESS_RATIO, IndeterminateAccelerations, accelerations)
 from mbh._harness.neutral.equation_kernels import CompiledRows, row_table
-from mbh._harness.neutral.dynamics_kernels import (body_table, branch_acceleration, branch_pose, branch_rate,
-                                     full_rates, mass_spread)
+from mbh._harness.neutral.dynamics_kernels import (body_table, branch_acceleration, branch_pose,
+                                                   branch_rate, full_rates, mass_spread)
 from mbh._harness.model.outputs import wrap_angle
 from mbh._harness.model.trajectory import BodyStates, Trajectory
 from mbh._harness.common.errors import MbhError

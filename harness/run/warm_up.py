@@ -5,7 +5,7 @@ The in-house kernels and loops are compiled by numba at their first use and cach
 and code (docs/speed.md, "Caches"): a fresh machine, or a new version of the kernels, pays a few
 minutes once.  A test suite's workers or a campaign's cases would each meet that wait at a
 different place (one process compiles, the others wait on its lock,
-:mod:`mbh._adapters.inhouse.on_demand`); the warm-up pays it up front, with the cores in parallel,
+:mod:`mbh._adapters.inhouse.stepping.on_demand`); the warm-up pays it up front, with the cores in parallel,
 and says so.  ``make test`` and ``make report`` run it first: the measured choice between this and
 compiling at install time is in docs/speed.md, "What a first run compiles".
 

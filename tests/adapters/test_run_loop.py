@@ -166,7 +166,7 @@ def test_engine_exception_keeps_the_samples_before_it(built, monkeypatch, name):
 def test_partitioning_failure_outside_the_step_is_a_failed_row(built, monkeypatch):
     """``StepFailure`` raised by the re-partition check (between steps, outside ``step()``):
     the check runs before steps 2, 3, …; its fourth call, before step 5, raises."""
-    from mbh._adapters.inhouse.partition import CoordinatePartitioning
+    from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
 
     adapter, model = built["inhouse"]
     calls = {"n": 0}
@@ -189,7 +189,7 @@ def test_partitioning_failure_outside_the_step_is_a_failed_row(built, monkeypatc
 def test_ida_exception_keeps_the_samples_before_it(built, monkeypatch):
     """IDA chooses its own steps: the fourth advance (towards the sample at 3·DT) raises, so the
     samples 0, DT, 2·DT are kept and the last good state is IDA's last step, in [2·DT, 3·DT)."""
-    from mbh._adapters.inhouse.dae import IdaIntegration
+    from mbh._adapters.inhouse.formulations.dae import IdaIntegration
 
     adapter, model = built["inhouse"]
     advance = IdaIntegration.advance_to
@@ -282,7 +282,7 @@ def test_projected_adaptive_samples_lie_on_the_constraints(fourbar, built, monke
     """dop853+direct:rtol=1e-6 over 4 s sampled every 10 ms (86 accepted steps, so most samples
     fall between steps).  Measured largest joint gap of the samples: 1.9e-13 m projected,
     1.43e-6 m from the unprojected dense output; velocity residual 5.0e-15 vs 1.05e-5 m/s."""
-    from mbh._adapters.inhouse.driver import PROJECTED_SAMPLES_NOTE, InhouseStepper
+    from mbh._adapters.inhouse.stepping.driver import PROJECTED_SAMPLES_NOTE, InhouseStepper
 
     adapter, model = built["inhouse"]
     times = np.arange(401) * 0.01

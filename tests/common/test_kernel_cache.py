@@ -25,8 +25,8 @@ ROOT = Path(__file__).resolve().parents[2]
 #: bodykin._with_origin (bodykin.py), the function the test edits.
 PHI_SCRIPT = """
 import json
-from mbh._adapters.inhouse import kernels
-from mbh._adapters.inhouse.constraints import ConstraintSystem, reference_coordinates
+from mbh._adapters.inhouse.bodies import kernels
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem, reference_coordinates
 from mbh._harness.model import scenario
 mech = scenario.load("fourbar")
 print(json.dumps(kernels.phi(reference_coordinates(mech), 0.0,
@@ -119,10 +119,10 @@ def test_every_global_a_compiled_kernel_reads_is_in_the_fingerprint():
     sources = set(kernel_cache.kernel_sources())
     kernels = {}
     for package in kernel_cache.KERNEL_PACKAGES:
-        prefix = "mbh._" + ".".join(package.relative_to(ROOT).parts)
-        for path in sorted(package.glob("*.py")):
-            module = importlib.import_module(prefix if path.stem == "__init__" else
-                                             f"{prefix}.{path.stem}")
+        for path in sorted(package.rglob("*.py")):
+            parts = path.relative_to(ROOT).with_suffix("").parts
+            parts = parts[:-1] if parts[-1] == "__init__" else parts
+            module = importlib.import_module("mbh._" + ".".join(parts))
             for value in vars(module).values():
                 function = _jitted(value)
                 if function is not None:
@@ -150,7 +150,7 @@ def test_every_global_a_compiled_kernel_reads_is_in_the_fingerprint():
 def test_the_kernel_packages_are_cached_in_the_fingerprint_folder_and_the_rest_left_to_numba(
         tmp_path, monkeypatch):
     monkeypatch.setenv("MBH_GENERATED_DIR", str(tmp_path))
-    source = kernel_cache.KERNEL_PACKAGES[0] / "kernels.py"
+    source = kernel_cache.KERNEL_PACKAGES[0] / "bodies" / "kernels.py"
     assert kernel_cache.cache_folder(source).parent == kernel_cache.kernel_folder()
     assert kernel_cache.kernel_folder().name == kernel_cache.fingerprint(
         kernel_cache.kernel_sources())

@@ -9,7 +9,8 @@ import numpy as np
 import scipy
 
 from mbh._harness.common.machine_speed import machine_speed_s, workload_name
-from mbh._harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
+from mbh._harness.run.calibration import (CALIBRATION, WithCalibration, calibration_work,
+                                          store_figure)
 from mbh._harness.run.spec import CaseSpec
 from mbh._harness.store.compare import comparable_calibrations
 from mbh._harness.store.runs import RunStore

@@ -13,8 +13,8 @@ from scipy.special import ellipj, ellipk
 
 from mbh._harness.measure.energy import (QUADRATURE_DEGREE, cumulative_quadrature, energy_balance,
                             energy_scale, interval_work, kinetic_energy, state_arrays)
-from mbh._harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint, Mechanism,
-                           SpringDamper)
+from mbh._harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, InitialState, Joint,
+                                          Mechanism, SpringDamper)
 from mbh._harness.model.trajectory import Trajectory
 
 G = np.array([0.0, -9.81, 0.0])

@@ -16,7 +16,8 @@ from mbh._harness.model.mechanism import (
     Mechanism,
 )
 from mbh._harness.model.scenario import load, scenario_names
-from mbh._harness.model.topology import angular_velocities, incidence_matrix, spanning_tree, system_graph
+from mbh._harness.model.topology import (angular_velocities, incidence_matrix, spanning_tree,
+                                         system_graph)
 
 
 def exact_closure(joint: Joint) -> int:
@@ -244,9 +245,9 @@ def test_angular_velocities_name_bad_shapes():
 def test_angular_velocity_map_matches_inhouse_velocities(name):
     """Joint rates measured from an in-house velocity analysis, mapped through the path matrix
     (Arczewski 1995, eq. 3/7), give back the in-house absolute angular velocities."""
-    from mbh._adapters.inhouse.constraints import layout_of
-    from mbh._adapters.inhouse.kinematics import assemble
-    from mbh._adapters.inhouse.states import body_states
+    from mbh._adapters.inhouse.bodies.constraints import layout_of
+    from mbh._adapters.inhouse.bodies.kinematics import assemble
+    from mbh._adapters.inhouse.bodies.states import body_states
     from mbh._harness.model.mechanism import SPATIAL_JOINT_CLASS
     from mbh._harness.model.outputs import body_rotations, joint_rate
 

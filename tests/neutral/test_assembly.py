@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from tests.helpers import variant_text
 
-from mbh._adapters.inhouse.constraints import layout_of
-from mbh._adapters.inhouse.kinematics import assemble as inhouse_assemble
-from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.inhouse.bodies.constraints import layout_of
+from mbh._adapters.inhouse.bodies.kinematics import assemble as inhouse_assemble
+from mbh._adapters.inhouse.bodies.states import body_states
 from mbh._harness import cli
 from mbh._harness.model import scenario
 from mbh._harness.neutral.assembly import AssemblyError, SingularStartError, assemble

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of
-from mbh._adapters.inhouse.kinematics import assemble as inhouse_assemble
-from mbh._adapters.inhouse.states import body_states, coordinates
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem, layout_of
+from mbh._adapters.inhouse.bodies.kinematics import assemble as inhouse_assemble
+from mbh._adapters.inhouse.bodies.states import body_states, coordinates
 from mbh._harness.model import scenario
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.measure.metrics import constraint_violations, violation_series

@@ -19,8 +19,8 @@ import pytest
 from mbh._harness.model import scenario
 from scipy.spatial.transform import Rotation
 
-from mbh._harness.neutral.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE, assemble,
-                              newton_positions)
+from mbh._harness.neutral.assembly import (MAX_ITERATIONS, POLISH_STEPS, POSITION_TOLERANCE,
+                                           assemble, newton_positions)
 from mbh._harness.references.routes import (FULL_ROUTE_BAUMGARTE, BranchEquations, full_route,
                                   reduced_route)
 from mbh._harness.neutral.equations import twist_vector
@@ -29,8 +29,8 @@ from mbh._harness.model.mechanism import (GROUND, Body, BodyForce, BodyTorque, I
 from mbh._harness.neutral.dynamics import (DIFFERENCE_STEP, DIFFERENCE_TURN, KKT_RCOND,
                                       UNIQUENESS_RATIO, IndeterminateAccelerations, accelerations,
                                       gamma, twist_mass_and_forces)
-from mbh._harness.neutral.dynamics_kernels import (body_table, branch_pose, full_rates, mass_and_forces,
-                                     mass_spread)
+from mbh._harness.neutral.dynamics_kernels import (body_table, branch_pose, full_rates,
+                                                   mass_and_forces, mass_spread)
 from mbh._harness.neutral.dynamics_kernels import gamma as compiled_gamma
 from mbh._harness.references.build import (AGREEMENT_LIMIT, reference_grid, reference_trajectory,
                                route_difference)

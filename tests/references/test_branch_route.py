@@ -16,11 +16,12 @@ from scipy.spatial.transform import Rotation
 
 from mbh._harness.model import scenario
 from mbh._harness.neutral.assembly import assemble
-from mbh._harness.references.routes import BranchEquations, BranchRouteError, full_route, reduced_route
+from mbh._harness.references.routes import (BranchEquations, BranchRouteError, full_route,
+                                            reduced_route)
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.model.outputs import output_series
-from mbh._harness.references.build import AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info, route_difference, \
-    reference_trajectory
+from mbh._harness.references.build import (AGREEMENT_LIMIT, BRANCH_ROUTE_A, reference_info,
+                                           reference_trajectory, route_difference)
 from mbh._harness.model.scenario import ScenarioError
 
 

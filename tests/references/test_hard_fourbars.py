@@ -21,8 +21,8 @@ from mbh._adapters import get_adapter
 from mbh._harness.model import scenario
 from mbh._harness.neutral.assembly import assemble
 from mbh._harness.run.case import run_case
-from mbh._harness.measure.energy import (coordinate_work, energy_balance, energy_scale, kinetic_energy,
-                            state_arrays)
+from mbh._harness.measure.energy import (coordinate_work, energy_balance, energy_scale,
+                                         kinetic_energy, state_arrays)
 from mbh._harness.neutral.dynamics import accelerations
 from mbh._harness.model.outputs import output_series
 from mbh._harness.references.build import reference_grid, reference_trajectory

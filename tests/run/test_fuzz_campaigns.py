@@ -24,7 +24,8 @@ from hypothesis import strategies as st
 
 from mbh._adapters import adapter_names
 from mbh._harness.model.scenario import scenario_names
-from mbh._harness.run.spec import Campaign, CampaignError, campaign_names, campaign_path, load_campaign
+from mbh._harness.run.spec import (Campaign, CampaignError, campaign_names, campaign_path,
+                                   load_campaign)
 from tests.fuzzing import BASE, BREAKS, HUGE, NAMES, NUMBERS, VALUES, fuzzed_file, toml_document
 
 DEFAULT_EXAMPLES = 200

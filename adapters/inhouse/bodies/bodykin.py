@@ -18,7 +18,7 @@ helper writing into a scratch array made every row of Φ_q and γ cost several t
 with tuples 0.08 µs), presumably because the compiler must assume that a scratch array may alias
 q and q̇ and so reloads them after every store.  Jacobians are added straight into the rows of
 Φ_q (:func:`add_rotate_jacobian`, :func:`add_point_jacobian`, :func:`add_point_block`); the
-force kernels of :mod:`mbh._adapters.inhouse.dynamics` follow the same rule.  All are inlined into
+force kernels of :mod:`mbh._adapters.inhouse.formulations.dynamics` follow the same rule.  All are inlined into
 their callers (``inline="always"``): a call of a separately compiled function with array
 arguments costs more than these few flops (its arguments' reference counts, atomic updates, are
 changed on entry and exit).

@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mbh._adapters.inhouse import kernels
-from mbh._adapters.inhouse.banded import Sparsity, sparsity
-from mbh._adapters.inhouse.bodykin import PLANAR_NC, SPATIAL_NC
+from mbh._adapters.inhouse.bodies import kernels
+from mbh._adapters.inhouse.numerics.banded import Sparsity, sparsity
+from mbh._adapters.inhouse.bodies.bodykin import PLANAR_NC, SPATIAL_NC
 from mbh._harness.model.mechanism import GROUND, Joint, Mechanism
 
 _Z = np.array([0.0, 0.0, 1.0])
@@ -187,7 +187,7 @@ class ConstraintSystem:
 
     @property
     def sparsity(self) -> Sparsity:
-        """Where Φ_q can be non-zero and a banded row order (:mod:`mbh._adapters.inhouse.banded`)."""
+        """Where Φ_q can be non-zero and a banded row order (:mod:`mbh._adapters.inhouse.numerics.banded`)."""
         if self._sparsity is None:
             self._sparsity = sparsity(self._row_bodies, self.layout.n_bodies, self.layout.nc)
         return self._sparsity

@@ -1,7 +1,7 @@
 """Compiled constraint kernels: Φ, Φ_q, Φ_t and γ for a table of primitive constraints.
 
 Every joint of Rouvinen 2003, ch. 2 is composed of a handful of primitives (see
-:mod:`mbh._adapters.inhouse.constraints`), stored row-wise in flat arrays so that one compiled loop
+:mod:`mbh._adapters.inhouse.bodies.constraints`), stored row-wise in flat arrays so that one compiled loop
 evaluates the whole system:
 
 ==========  ====  ==========================================================================
@@ -22,13 +22,13 @@ Arrays (k primitives): ``kind, bi, bj, row, driver`` int64 (k,); ``ui, uj, pi, g
 (vectors or points on body i / j, the second point on i for DOT_VD, the second vector on j for
 DRIVE_ROT); ``const`` float64 (k,).  The kernels take them packed, with ``nc`` first and the
 driver ``drive`` and row count ``m`` last, as one tuple ``args``
-(:attr:`~mbh._adapters.inhouse.constraints.ConstraintSystem.kernel_args`).  Φ, Φ_q and γ are inlined
+(:attr:`~mbh._adapters.inhouse.bodies.constraints.ConstraintSystem.kernel_args`).  Φ, Φ_q and γ are inlined
 into their compiled callers (``inline="always"``): a call of a compiled function with eleven
 array arguments cost ~0.13 µs (planar four-bar, one call in a compiled loop: Φ_q 0.38 → 0.25 µs,
 γ 0.32 → 0.18 µs inlined), at the price of a longer first compilation.
 
 The small helpers below are inlined into the kernels (``inline="always"``), as those of
-:mod:`mbh._adapters.inhouse.bodykin` are, and for the same reason: a call of a separately compiled
+:mod:`mbh._adapters.inhouse.bodies.bodykin` are, and for the same reason: a call of a separately compiled
 function with array arguments costs more than their arithmetic.  Like those, they pass vectors as
 tuples (x, y, z), never through scratch arrays (the module notes there say why).
 """
@@ -38,7 +38,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mbh._adapters.inhouse.bodykin import (
+from mbh._adapters.inhouse.bodies.bodykin import (
     PLANAR_NC,
     add_point_block,
     add_point_jacobian,

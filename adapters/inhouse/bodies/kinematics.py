@@ -10,11 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
-from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of, reference_coordinates
-from mbh._adapters.inhouse.rank import RankReport, rank_analysis
-from mbh._adapters.inhouse.states import coordinates
+from mbh._adapters.inhouse.bodies.constraints import (ConstraintSystem, layout_of,
+                                                      reference_coordinates)
+from mbh._adapters.inhouse.numerics.rank import JacobianRank, jacobian_rank
+from mbh._adapters.inhouse.bodies.states import coordinates
 from mbh._harness.common.errors import MbhError
-from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.mechanism import Mechanism, grubler_mobility
 
 #: Assembly stops when max |Φ| falls below this (m, rad, or dimensionless).
 ASSEMBLY_TOLERANCE = 1e-13
@@ -139,11 +140,12 @@ def common_start(mech: Mechanism) -> Assembly:
     return Assembly(q, v, a, residual, iterations)
 
 
-def rank_report(mech: Mechanism, q: np.ndarray) -> RankReport:
-    """Rank analysis of the joint equations at configuration q (see :mod:`rank`)."""
+def rank_report(mech: Mechanism, q: np.ndarray) -> JacobianRank:
+    """Rank analysis of the joint equations at configuration q
+    (:func:`~mbh._adapters.inhouse.numerics.rank.jacobian_rank`)."""
     joints = ConstraintSystem(mech)
     driven = ConstraintSystem(mech, with_driver=True)
-    return rank_analysis(mech, joints.jacobian(q), joints.labels, driven.jacobian(q)[-1])
+    return jacobian_rank(joints.jacobian(q), joints.labels, driven.jacobian(q)[-1])
 
 
 def check(mech: Mechanism) -> dict:
@@ -158,7 +160,7 @@ def check(mech: Mechanism) -> dict:
         "n_equations": report.n_equations,
         "rank": report.rank,
         "mobility": report.mobility,
-        "grubler_mobility": report.grubler_mobility,
+        "grubler_mobility": grubler_mobility(mech),
         "redundant_equations": len(report.redundant),
         "redundant_equation_labels": list(report.redundant_labels),
         "assembly_residual": assembly.residual,

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from mbh._adapters.inhouse.constraints import Layout
+from mbh._adapters.inhouse.bodies.constraints import Layout
 from mbh._harness.model.trajectory import BodyStates
 
 

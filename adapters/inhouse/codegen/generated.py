@@ -1,17 +1,17 @@
 """Generated kernels: what the compiled loop computes at every stage and step, traced for one
 formulation into straight-line code.
 
-The generic kernels (:func:`~mbh._adapters.inhouse.dynamics.index1_acceleration`, the projection's
+The generic kernels (:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`, the projection's
 Φ, Φ_q and minimum-norm corrections, the conditioning indicator ρ̂) loop over tables of
 primitives, bodies and matrix entries.  :func:`compiled_function` runs one of them once on
-symbols (:mod:`mbh._adapters.inhouse.tracing`) with the formulation's rows, gains, projection cut and
+symbols (:mod:`mbh._adapters.inhouse.codegen.tracing`) with the formulation's rows, gains, projection cut and
 tables fixed, and compiles what it recorded as a numba ``cfunc`` of :data:`SIGNATURE`::
 
     accepted = function(q, v, t, out)     # q, v (n,), t s; writes into out
 
 It returns 1 with ``out`` the kernel's result to the bit, or 0 (``out`` unspecified) where one of
 the kernel's branches on data goes the other way than at the traced state (a guard: a pivot, the
-certificate of a Cholesky solve); the compiled loop (:mod:`mbh._adapters.inhouse.compiled`) then calls
+certificate of a Cholesky solve); the compiled loop (:mod:`mbh._adapters.inhouse.stepping.compiled`) then calls
 the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION` …), with
 :data:`NEVER` (always 0: the kernel) where one cannot be made: a trace over
 :data:`MAX_OPERATIONS`, a kernel path through LAPACK (the banded solves of planar systems with
@@ -20,7 +20,7 @@ the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION
 A generated right-hand side is several times faster than the kernel (figures:
 docs/measurements.md, section "In-house step cost").  The cost is the first compilation, seconds
 per function, paid once per formulation and machine: the source goes to an entry of
-:mod:`mbh._adapters.inhouse.generated_store` named by its hash, where numba caches the compiled
+:mod:`mbh._adapters.inhouse.codegen.generated_store` named by its hash, where numba caches the compiled
 function next to it.  The trace itself (0.01–0.3 s per function on the shipped scenes, more for
 a large one that passes :data:`MAX_OPERATIONS`) is paid once too: the store remembers which entry,
 or which reason for none, a trace's inputs gave (:func:`trace_key`), and a later run with the same
@@ -41,7 +41,10 @@ import numpy as np
 from numba import cfunc, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from mbh._adapters.inhouse import banded, bodykin, dynamics, generated_store, kernels, linalg, tracing
+from mbh._adapters.inhouse.bodies import bodykin, kernels
+from mbh._adapters.inhouse.codegen import generated_store, tracing
+from mbh._adapters.inhouse.formulations import dynamics, mass_and_forces
+from mbh._adapters.inhouse.numerics import banded, linalg
 from mbh._harness.common import waits
 from mbh._harness.common.kernel_cache import kernel_fingerprint
 
@@ -86,14 +89,14 @@ class NotTraceable(NotGenerated):
 #: The generated functions, by their index in :func:`functions`' tuple (all of
 #: :data:`SIGNATURE`; ``out`` as given):
 #:
-#: * ACCELERATION — q̈ (n,) of :func:`~mbh._adapters.inhouse.dynamics.index1_acceleration`;
+#: * ACCELERATION — q̈ (n,) of :func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`;
 #: * RESIDUAL_SIZE — max |Φ| over the formulation's rows, out[0];
 #: * POSITION_CORRECTION — q − Φ_q⁺Φ (n,), one iteration of the position projection (Rouvinen 2003, eq. 127,
-#:   :func:`~mbh._adapters.inhouse.banded.min_norm_correction`);
+#:   :func:`~mbh._adapters.inhouse.numerics.banded.min_norm_correction`);
 #: * VELOCITY_CORRECTION — q̇ − Φ_q⁺Φ_q q̇ (n,) and ρ̂ in out[n], the velocity projection (Rouvinen 2003
 #:   eq. 137) and the conditioning indicator of the placed passages
-#:   (:func:`~mbh._adapters.inhouse.banded.min_norm_correction_and_indicator`);
-#: * INDICATOR — ρ̂ alone, out[0] (:func:`~mbh._adapters.inhouse.banded.conditioning_indicator`).
+#:   (:func:`~mbh._adapters.inhouse.numerics.banded.min_norm_correction_and_indicator`);
+#: * INDICATOR — ρ̂ alone, out[0] (:func:`~mbh._adapters.inhouse.numerics.banded.conditioning_indicator`).
 ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR = range(5)
 #: The line that makes a generated source's function a compiled ``cfunc``.
 _DECORATOR = "@cfunc(SIGNATURE, cache=True)\n"
@@ -112,7 +115,7 @@ def kernel_outputs(which: int, formulation, q, v, t) -> list:
         return list(dynamics.index1_acceleration(q, v, t, alpha, beta, rows, constraint_args,
                                                  formulation.dynamics.kernel_args,
                                                  sparsity_arrays))
-    if which == RESIDUAL_SIZE:  # compiled._max_abs: the largest of 0 and every |Φ_i|
+    if which == RESIDUAL_SIZE:  # kernel_step._max_abs: the largest of 0 and every |Φ_i|
         return [tracing.maximum([0.0, *(abs(x) for x in
                                        kernels.phi(q, t, constraint_args)[rows])])]
     jacobian = kernels.jacobian(q, t, constraint_args)[rows]
@@ -165,7 +168,7 @@ def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> 
     graph = tracing.Graph(limit=MAX_OPERATIONS)
     name = _NAMES[which]
     try:
-        with tracing.tracing([kernels, dynamics, linalg, bodykin, banded]):
+        with tracing.tracing([kernels, mass_and_forces, dynamics, linalg, bodykin, banded]):
             out = kernel_outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
                            graph.scalar("t", 0.0))
     except tracing.LimitReached:
@@ -233,10 +236,10 @@ def _traced_source(key: str | None, which: int, formulation, q0: np.ndarray,
         if key:
             generated_store.remember(key, {"not_generated": str(error)})
         raise
-    source = ("# Generated by adapters/inhouse/generated.py for one formulation.  Do not edit;\n"
+    source = ("# Generated by adapters/inhouse/codegen/generated.py for one formulation.  Do not edit;\n"
               "# delete freely (it is made again when needed).\n"
               "import numpy as np\nfrom numba import cfunc\n\n"
-              "from mbh._adapters.inhouse.generated import SIGNATURE\n\n\n"
+              "from mbh._adapters.inhouse.codegen.generated import SIGNATURE\n\n\n"
               + _DECORATOR + body)
     if key:
         generated_store.remember(key, {"module": module_name(source)})
@@ -247,7 +250,7 @@ def compiled_function(which: int, formulation, q0: np.ndarray, v0: np.ndarray,
                       compile_new: bool = True):
     """Generated function ``which`` of ``formulation``, compiled (a ``cfunc`` of
     :data:`SIGNATURE`), from numba's cache when this source was compiled before
-    (:mod:`mbh._adapters.inhouse.generated_store`: a damaged entry is compiled again).  A trace whose
+    (:mod:`mbh._adapters.inhouse.codegen.generated_store`: a damaged entry is compiled again).  A trace whose
     inputs were traced before (:func:`trace_key`) is not repeated: its remembered entry is loaded
     when its source still matches its name, and a remembered reason for none is raised again.
 

@@ -1,4 +1,4 @@
-"""The folder of generated functions (:mod:`mbh._adapters.inhouse.generated`): one entry per traced
+"""The folder of generated functions (:mod:`mbh._adapters.inhouse.codegen.generated`): one entry per traced
 source, the whole folder bounded in size, a damaged entry rebuilt.
 
 Layout, under :func:`mbh._harness.common.locations.generated_cache` (``$MBH_GENERATED_DIR``, else

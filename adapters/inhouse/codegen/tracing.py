@@ -1,8 +1,9 @@
 """Straight-line code from the compiled kernels: run a kernel's Python source once on symbols,
 record every floating-point operation it makes, and write them out as one branch-free function.
 
-The generic kernels (:mod:`~mbh._adapters.inhouse.kernels`, :mod:`~mbh._adapters.inhouse.dynamics`,
-:mod:`~mbh._adapters.inhouse.linalg`) loop over tables of primitives, bodies and matrix entries; most
+The generic kernels (:mod:`~mbh._adapters.inhouse.bodies.kernels`,
+:mod:`~mbh._adapters.inhouse.formulations.mass_and_forces`, :mod:`~mbh._adapters.inhouse.formulations.dynamics`,
+:mod:`~mbh._adapters.inhouse.numerics.linalg`) loop over tables of primitives, bodies and matrix entries; most
 of their time goes to that bookkeeping (indices, branches on the kind of a row, zero fills,
 products with zeros).  Run on symbols instead of numbers (:class:`Symbol`), with the tables as
 plain constants, the same Python source leaves only the arithmetic of one mechanism: a graph of
@@ -23,7 +24,7 @@ the range-space solve took 2,878 operations of the acceleration's 3,687; with it
 
 *Guards.*  A kernel's branches on data (a Cholesky pivot that must be positive, a certificate
 bound) are taken during the trace as the traced values take them, at a generic state chosen by
-the caller.  (The skips of exact zeros, :func:`~mbh._adapters.inhouse.linalg.skippable`, decide
+the caller.  (The skips of exact zeros, :func:`~mbh._adapters.inhouse.numerics.linalg.skippable`, decide
 nothing and are not guarded: a traced entry is never skipped.)  A foreign function (LAPACK)
 cannot be traced and stops the trace (:class:`Untraceable`).  Each such comparison becomes a guard: the generated function
 re-tests it and returns 0 (not written) when it comes out the other way, so the caller falls back
@@ -269,7 +270,7 @@ _TRACING_NUMPY = _TracingNumpy(
 
 
 def _skippable(x) -> bool:
-    """:func:`~mbh._adapters.inhouse.linalg.skippable` while tracing: only a constant zero is left
+    """:func:`~mbh._adapters.inhouse.numerics.linalg.skippable` while tracing: only a constant zero is left
     out, a symbol is kept whatever its traced value (no guard: the kernel's skip of an exact zero
     changes no number, and a guard on it would fail whenever an entry's zeros differ from the
     traced state's)."""
@@ -277,7 +278,7 @@ def _skippable(x) -> bool:
 
 
 #: Foreign functions a kernel may call: ctypes pointers and numba's declarations of them
-#: (``types.ExternalFunction``, as :mod:`mbh._adapters.inhouse.banded` declares LAPACK's dpbtrf).
+#: (``types.ExternalFunction``, as :mod:`mbh._adapters.inhouse.numerics.banded` declares LAPACK's dpbtrf).
 _FOREIGN = (ctypes._CFuncPtr, numba_types.ExternalFunction)
 
 

@@ -77,9 +77,10 @@ import numpy as np
 import sksundae
 
 from mbh._adapters.base import RunFailure, describe
-from mbh._adapters.inhouse.constraints import ConstraintSystem
-from mbh._adapters.inhouse.dynamics import Dynamics, solve_augmented
-from mbh._adapters.inhouse.rank import full_pivot_elimination
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
+from mbh._adapters.inhouse.formulations.dynamics import solve_augmented
+from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
+from mbh._adapters.inhouse.numerics.rank import full_pivot_elimination
 from mbh._harness.model.mechanism import Mechanism
 
 FORMS = ("ggl", "index3")

@@ -8,7 +8,7 @@ and the smaller the step, the closer the closest one comes: on the plain grid th
 as the step shrinks (figures in docs/measurements.md).
 
 So the step that passes a singular position is placed: the passage is predicted from the
-conditioning indicator ρ̂ (:func:`~mbh._adapters.inhouse.banded.conditioning_indicator`, ≈ σ_min/σ_max
+conditioning indicator ρ̂ (:func:`~mbh._adapters.inhouse.numerics.banded.conditioning_indicator`, ≈ σ_min/σ_max
 of Φ_q, linear in the distance to the crossing) at the last two step ends, and the run takes
 
 1. a *lead* step up to where the passage lies at the fraction c* of the next step, c* the middle
@@ -25,12 +25,12 @@ those of a run on the grid.  Used by the ``none``, ``baumgarte``, ``direct`` and
 strategies with the fixed-step one-step methods, on both stepping paths (the same plan from the
 same numbers, so the same steps); ``passage=0`` turns it off.  Coordinate partitioning measures ρ̂
 in its re-partition check after each step and keeps its stages farther away (its own clearance,
-:attr:`~mbh._adapters.inhouse.partition.CoordinatePartitioning.passage_clearance`).
+:attr:`~mbh._adapters.inhouse.formulations.partition.CoordinatePartitioning.passage_clearance`).
 
 With placed passages ``best`` converges through the passages of double_fourbar as the step
 shrinks, down to a floor set by the unstable motion between passages, not by the passages; the
 cost is a few per cent per step (the indicator, one Cholesky factorisation of Φ_q Φ_qᵀ, banded
-from :data:`~mbh._adapters.inhouse.banded.BANDED_MIN_ROWS` rows, and for ``none`` and ``baumgarte`` the
+from :data:`~mbh._adapters.inhouse.numerics.banded.BANDED_MIN_ROWS` rows, and for ``none`` and ``baumgarte`` the
 Φ_q it needs).  Errors and timings, placed against the plain grid, with the commands that
 reproduce them: docs/measurements.md, "Placed steps through singular positions".
 """
@@ -167,7 +167,7 @@ class Passages:
 
     @property
     def arrays(self) -> tuple:
-        """(placement, rho_zone, indicators, count), as :func:`mbh._adapters.inhouse.compiled.
+        """(placement, rho_zone, indicators, count), as :func:`mbh._adapters.inhouse.stepping.compiled.
         run_steps` takes them."""
         return self.placement, self.rho_zone, self.indicators, self.count
 

@@ -20,8 +20,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from mbh._adapters.inhouse.dynamics import g_bar, solve_augmented
-from mbh._adapters.inhouse.stabilisation import Formulation
+from mbh._adapters.inhouse.formulations.dynamics import solve_augmented
+from mbh._adapters.inhouse.formulations.mass_and_forces import g_bar
+from mbh._adapters.inhouse.formulations.stabilisation import Formulation
 from mbh._adapters.integrators import so3
 
 

@@ -23,9 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from mbh._adapters.integrators.base import StepFailure
-from mbh._adapters.inhouse.linalg import solve, solve_matrix
-from mbh._adapters.inhouse.rank import full_pivot_elimination
-from mbh._adapters.inhouse.stabilisation import Formulation
+from mbh._adapters.inhouse.numerics.linalg import solve, solve_matrix
+from mbh._adapters.inhouse.numerics.rank import full_pivot_elimination
+from mbh._adapters.inhouse.formulations.stabilisation import Formulation
 
 
 class CoordinatePartitioning(Formulation):
@@ -35,7 +35,7 @@ class CoordinatePartitioning(Formulation):
                    "dependent block is cond_ratio times worse conditioned than the best split")
     defaults = {"newton_tol": 1e-13, "newton_max_iter": 20, "cond_ratio": 1.01, "passage": 1}
     keeps_redundant_rows = False
-    #: Passages of singular positions are placed (:mod:`mbh._adapters.inhouse.fold`; ρ̂ is measured on
+    #: Passages of singular positions are placed (:mod:`mbh._adapters.inhouse.formulations.fold`; ρ̂ is measured on
     #: the Φ_q of the re-partition check, with every row kept only: a start that dropped
     #: redundant rows places none).  At a crossing every dependent block is singular, so the
     #: reduced equations lose accuracy near it like the index-1 ones do.  The clearance is

@@ -16,7 +16,7 @@ name            method
 ``direct``      direct violation correction: position (eq. 127) and velocity (eq. 137) projection
 ==============  =========================================================================
 
-Coordinate partitioning (eq. 78–89) lives in :mod:`mbh._adapters.inhouse.partition`.
+Coordinate partitioning (eq. 78–89) lives in :mod:`mbh._adapters.inhouse.formulations.partition`.
 
 A mechanism with redundant constraints keeps only the independent equations found by the rank
 analysis at the initial configuration (Frączek & Wojtyra 2009, §1.3.2); its reaction split is then not unique.
@@ -27,14 +27,16 @@ from __future__ import annotations
 import numpy as np
 import scipy.linalg
 
-from mbh._adapters.inhouse.constraints import ConstraintSystem
-from mbh._adapters.inhouse.dynamics import Dynamics, acceleration_jacobian, index1_acceleration
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
+from mbh._adapters.inhouse.formulations.dynamics import acceleration_jacobian, index1_acceleration
+from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.integrators.base import SecondOrderSystem
-from mbh._adapters.inhouse.banded import (conditioning_indicator, min_norm_correction_and_indicator,
-                                     pattern_matvec)
-from mbh._adapters.inhouse.fold import SAFE_INDICATOR
-from mbh._adapters.inhouse.rank import RANK_TOLERANCE, full_pivot_elimination
-from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.inhouse.numerics.banded import (conditioning_indicator,
+                                                   min_norm_correction_and_indicator,
+                                                   pattern_matvec)
+from mbh._adapters.inhouse.formulations.fold import SAFE_INDICATOR
+from mbh._adapters.inhouse.numerics.rank import RANK_TOLERANCE, full_pivot_elimination
+from mbh._adapters.inhouse.bodies.states import body_states
 from mbh._harness.model.mechanism import Mechanism
 
 
@@ -104,18 +106,18 @@ class Formulation(SecondOrderSystem):
             self.indicators = np.array([start, start])
 
     #: Whether :meth:`project` changes the state (dense output between steps is then projected
-    #: before it is read, :class:`~mbh._adapters.inhouse.driver.InhouseStepper`).
+    #: before it is read, :class:`~mbh._adapters.inhouse.stepping.driver.InhouseStepper`).
     corrects = False
     #: Whether the strategy measures the conditioning indicator ρ̂ at every step end for the
-    #: placed passages of singular positions (:mod:`mbh._adapters.inhouse.fold`; its parameter
+    #: placed passages of singular positions (:mod:`mbh._adapters.inhouse.formulations.fold`; its parameter
     #: ``passage``: 1 places them, 0 steps the plain grid): ``indicators`` then holds ρ̂ at the
     #: last two step ends (both ρ̂ at the start before the first), else it is None (also set so
-    #: by :meth:`Passages.of <mbh._adapters.inhouse.fold.Passages.of>` for an integrator that cannot
+    #: by :meth:`Passages.of <mbh._adapters.inhouse.formulations.fold.Passages.of>` for an integrator that cannot
     #: place passages, and kept only when every constraint row enters the solves: ρ̂ of a subset
     #: of Φ_q's rows says nothing about the whole).
     places_passages = False
     #: The ρ̂-distance from a crossing that a placed passage keeps its stages at
-    #: (:data:`~mbh._adapters.inhouse.fold.SAFE_INDICATOR` for the index-1 strategies).
+    #: (:data:`~mbh._adapters.inhouse.formulations.fold.SAFE_INDICATOR` for the index-1 strategies).
     passage_clearance = SAFE_INDICATOR
 
     def _record_indicator(self, jac):
@@ -162,7 +164,7 @@ class Formulation(SecondOrderSystem):
 
     def _compiled_jacobian(self, t, q, v, a0):
         """[∂q̈/∂q, ∂q̈/∂q̇] at (t, q, q̇), shape (n, 2n), by forward differences of the fused
-        right-hand side in one compiled call (:func:`~mbh._adapters.inhouse.dynamics.
+        right-hand side in one compiled call (:func:`~mbh._adapters.inhouse.formulations.dynamics.
         acceleration_jacobian`); ``a0`` = :meth:`acceleration` there.  The implicit integrators
         use it instead of differencing from Python (2n evaluations either way)."""
         self.counters["jacobian_evals"] += 2 * self.n
@@ -314,7 +316,7 @@ class _Projection(Formulation):
 
     def _min_norm(self, jac, residual):
         """Φ_q⁺ r (eq. 126), truncated (see the class docstring), and ρ̂ of ``jac`` from the
-        same factorisation (:func:`~mbh._adapters.inhouse.banded.min_norm_correction_and_indicator`).
+        same factorisation (:func:`~mbh._adapters.inhouse.numerics.banded.min_norm_correction_and_indicator`).
         """
         self.counters["factorizations"] += 1
         return min_norm_correction_and_indicator(
@@ -368,7 +370,7 @@ class GeometricElimination(_Projection):
     along ∂Ψ/∂q̇ = M q̇ until the energy balance Ψ = T + V − W − E₀ vanishes (eq. 128, 136).
 
     Every term comes from this formulation's own model: T = ½ q̇ᵀ M(q) q̇ with the mass matrix of
-    :class:`~mbh._adapters.inhouse.dynamics.Dynamics`, V = −Σ m g·R, and W the work of the applied loads
+    :class:`~mbh._adapters.inhouse.formulations.mass_and_forces.Dynamics`, V = −Σ m g·R, and W the work of the applied loads
     (springs, dampers, torques, forces; gravity is in V), the integral of the generalised power
     P = Q_eᵀ q̇ over each step's actual length by the two-point Hermite rule
 

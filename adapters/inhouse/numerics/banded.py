@@ -9,7 +9,7 @@ carries and a row order that keeps those couplings near the diagonal; every prod
 then costs O(rows), and the factorisation O(rows · bandwidth²) instead of O(rows³): on the
 N-four-bar the bandwidth stays the same for every N.
 
-The dense path's certificate (:func:`~mbh._adapters.inhouse.linalg.certified_spd_solve`) needs
+The dense path's certificate (:func:`~mbh._adapters.inhouse.numerics.linalg.certified_spd_solve`) needs
 ‖L⁻¹‖_F, an O(rows²) computation; here an estimate of the 2-norm condition number takes its place
 (Gershgorin's bound on λ_max over an inverse-iteration estimate of λ_min, O(rows · bandwidth) per
 iteration).  LAPACK's dpbcon estimates the 1-norm condition number instead, which exceeds the
@@ -28,7 +28,8 @@ from numba import njit, types
 from numba.extending import get_cython_function_address
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
-from mbh._adapters.inhouse.linalg import gram_condition_bound, min_norm_solve, min_norm_solve_and_bound
+from mbh._adapters.inhouse.numerics.linalg import (gram_condition_bound, min_norm_solve,
+                                                   min_norm_solve_and_bound)
 
 #: From this many constraint rows on the banded solves are used: on n_fourbar@N the dense and
 #: banded solves cost about the same near 26 rows, and the banded ones win from there on
@@ -52,7 +53,7 @@ _dpbtrs = _lapack("dpbtrs", 9)   # uplo, n, kd, nrhs, ab, ldab, b, ldb, info
 INVERSE_ITERATIONS = 8
 #: A banded Cholesky solve is used only when the condition-number estimate is this factor inside
 #: the truncation threshold.  Unlike the dense path's bound
-#: (:data:`~mbh._adapters.inhouse.linalg.BOUND_MARGIN`) the estimate can fall short of κ₂ (the
+#: (:data:`~mbh._adapters.inhouse.numerics.linalg.BOUND_MARGIN`) the estimate can fall short of κ₂ (the
 #: inverse iterations may not have converged), so the factor is wider.
 ESTIMATE_MARGIN = 10.0
 
@@ -255,7 +256,7 @@ def banded_spd_solve_and_condition(matrix, weights, rhs, cut, sparsity_arrays):
 @njit(cache=True)
 def conditioning_indicator(matrix, sparsity_arrays):
     """ρ̂ = κ̂(Φ_q Φ_qᵀ)^(-1/2), an estimate of σ_min/σ_max of Φ_q = ``matrix`` (m, n) from the
-    certificates' condition estimates (:func:`~mbh._adapters.inhouse.linalg.gram_condition_bound`
+    certificates' condition estimates (:func:`~mbh._adapters.inhouse.numerics.linalg.gram_condition_bound`
     below :data:`BANDED_MIN_ROWS` rows, :func:`_banded_factor` from there on); 0 when Φ_q Φ_qᵀ
     is not positive definite (rank lost, or redundant rows kept).  Near a singular position
     σ_min/σ_max falls linearly with the distance to it, and so does ρ̂: the same fraction of it
@@ -279,7 +280,7 @@ def _indicator(positive, condition):
 
 @njit(cache=True)
 def min_norm_correction(matrix, rhs, cut, sparsity_arrays):
-    """Φ_q⁺ r of the projections (Rouvinen 2003, eq. 126) as :func:`~mbh._adapters.inhouse.linalg.min_norm_solve`
+    """Φ_q⁺ r of the projections (Rouvinen 2003, eq. 126) as :func:`~mbh._adapters.inhouse.numerics.linalg.min_norm_solve`
     does it, with the banded normal equations Aᵀ(AAᵀ)⁻¹ r for :data:`BANDED_MIN_ROWS` rows or
     more; ``matrix`` (m, n) has every row of ``sparsity_arrays``.  Shape (n,)."""
     return min_norm_correction_and_indicator(matrix, rhs, cut, sparsity_arrays)[0]

@@ -42,7 +42,7 @@ def truncated_solve(matrix, rhs, cut):
 def skippable(x):
     """True for an exact zero, whose products a sum may leave out: they add ±0 and change no
     finite sum, so skipping them saves work and decides nothing.  (Traced code,
-    :mod:`mbh._adapters.inhouse.tracing`, never skips: there every entry that is not a constant zero
+    :mod:`mbh._adapters.inhouse.codegen.tracing`, never skips: there every entry that is not a constant zero
     is kept.)"""
     return x == 0.0
 

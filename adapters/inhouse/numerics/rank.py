@@ -1,6 +1,8 @@
 """Rank analysis of a constraint Jacobian (Frączek & Wojtyra 2009, §1.3).
 
-* Grübler–Kutzbach mobility: w = 6n − Σ i·p_i (Frączek & Wojtyra 2009, eq. 1.39), planar w = 3n − Σ (eq. 1.40).
+The Grübler–Kutzbach count it is compared with (eq. 1.39 / 1.40) is
+:func:`mbh._harness.model.mechanism.grubler_mobility`.
+
 * Rank mobility: w = N − rank Φ_q(q0) (eq. 1.48), valid away from singular configurations.
 * Which equations are dependent: Gaussian elimination with full pivoting (eq. 1.49) on Φ_q; the
   rows never chosen as pivots are the redundant ones.
@@ -15,7 +17,6 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from mbh._harness.model.mechanism import PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Mechanism
 
 #: Pivots below this fraction of the largest |entry| count as zero.
 RANK_TOLERANCE = 1e-9
@@ -66,29 +67,23 @@ def full_pivot_elimination(matrix, tol=RANK_TOLERANCE):
     return rank, rows[:rank].copy()
 
 
-def grubler_mobility(mech: Mechanism) -> int:
-    """Chebyshev–Grübler–Kutzbach mobility (Frączek & Wojtyra 2009, eq. 1.39 / 1.40)."""
-    if mech.planar:
-        return 3 * len(mech.bodies) - sum(PLANAR_JOINT_CLASS[j.type] for j in mech.joints)
-    return 6 * len(mech.bodies) - sum(SPATIAL_JOINT_CLASS[j.type] for j in mech.joints)
-
-
 @dataclass(frozen=True)
-class RankReport:
-    """Result of :func:`rank_analysis`."""
+class JacobianRank:
+    """Result of :func:`jacobian_rank`: the rank of the in-house formulation's own constraint
+    Jacobian in absolute coordinates (not the measuring stick's rank analysis in twist
+    coordinates, :mod:`mbh._harness.neutral.mobility`)."""
 
     n_coordinates: int
     n_equations: int
     rank: int
     mobility: int
-    grubler_mobility: int
     redundant: tuple[int, ...]
     redundant_labels: tuple[str, ...]
     condition: float
     smallest_singular_value: float
 
 
-def rank_analysis(mech: Mechanism, jacobian: np.ndarray, labels, driver_row: np.ndarray) -> RankReport:
+def jacobian_rank(jacobian: np.ndarray, labels, driver_row: np.ndarray) -> JacobianRank:
     """Mobility, redundant equations and singularity measure at one configuration.
 
     Parameters
@@ -106,9 +101,8 @@ def rank_analysis(mech: Mechanism, jacobian: np.ndarray, labels, driver_row: np.
     singular_values = np.linalg.svd(square, compute_uv=False)
     smallest = float(singular_values[-1]) if square.shape[0] == n else 0.0
     condition = float(singular_values[0] / smallest) if smallest > 0 else float("inf")
-    return RankReport(
-        n_coordinates=n, n_equations=m, rank=rank, mobility=n - rank,
-        grubler_mobility=grubler_mobility(mech), redundant=redundant,
+    return JacobianRank(
+        n_coordinates=n, n_equations=m, rank=rank, mobility=n - rank, redundant=redundant,
         redundant_labels=tuple(labels[i] for i in redundant), condition=condition,
         smallest_singular_value=smallest,
     )

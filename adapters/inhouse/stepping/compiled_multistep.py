@@ -1,12 +1,12 @@
 """The compiled stepping path of the linear multistep methods (Adams–Bashforth, Adams–Moulton,
 Gear/BDF: :class:`~mbh._adapters.integrators.multistep.LinearMultistep`) with the ``none``,
 ``baumgarte`` and ``direct`` formulations: a whole run in one numba call, as
-:mod:`mbh._adapters.inhouse.compiled` runs the explicit one-step methods.
+:mod:`mbh._adapters.inhouse.stepping.compiled` runs the explicit one-step methods.
 
 The step is :class:`~mbh._adapters.integrators.multistep.LinearMultistep`'s on y = (q, q̇),
 f = (q̇, q̈) (Rouvinen 2003, eq. 94), in the same order: f at the step's start goes into the
 history; until the history holds the points the method reads, a classical RK4 step
-(:func:`mbh._adapters.inhouse.compiled._nystrom_step`, eqs. 102–106); then ψ of eq. 107 and, for an
+(:func:`mbh._adapters.inhouse.stepping.kernel_step.kernel_nystrom_step`, eqs. 102–106); then ψ of eq. 107 and, for an
 implicit method (β₀ ≠ 0), Newton's iteration on y − hβ₀ f(t_{n+1}, y) − ψ = 0 from the explicit
 Euler predictor, as :class:`~mbh._adapters.integrators.newton.NewtonSolver` iterates it: the
 iteration matrix I − hβ₀ J with J by forward differences at the last accepted state, kept
@@ -29,13 +29,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from mbh._adapters.inhouse.compiled import (CONSTRAINT_ARGS, FACTORIZATIONS, FAILED_LINALG,
-                                       FAILED_NEWTON, GENERATED, JACOBIAN_EVALS,
-                                       NEWTON_ITERATIONS, PLAIN, PROJECTED, RHS_EVALS, ROWS,
-                                       RUNNING, SPARSITY, _checked, _count_evaluation, _divergence,
-                                       _hold_and_keep, _kernel_acceleration, _nystrom_step,
-                                       _project, step_tableau)
-from mbh._adapters.inhouse.generated import ACCELERATION
+from mbh._adapters.inhouse.stepping.compiled import _checked, _divergence, _hold_and_keep
+from mbh._adapters.inhouse.stepping.kernel_step import (count_evaluation, kernel_acceleration,
+                                                        kernel_nystrom_step, project_state,
+                                                        step_tableau)
+from mbh._adapters.inhouse.stepping.loop_codes import (CONSTRAINT_ARGS, FACTORIZATIONS,
+                                                       FAILED_LINALG, FAILED_NEWTON, GENERATED,
+                                                       JACOBIAN_EVALS, NEWTON_ITERATIONS, PLAIN,
+                                                       PROJECTED, RHS_EVALS, ROWS, RUNNING,
+                                                       SPARSITY)
+from mbh._adapters.inhouse.codegen.generated import ACCELERATION
 from mbh._adapters.integrators.multistep import LinearMultistep, points_read
 from mbh._adapters.integrators.newton import SLOW_RATE
 from mbh._adapters.integrators.nystrom import RK4
@@ -62,7 +65,7 @@ def method_arguments(method_class: type[LinearMultistep], params: dict, n: int) 
         (α (p + 1,), β (k + 1,), (tol, max_iter, the slow rate of
         :data:`~mbh._adapters.integrators.newton.SLOW_RATE`: a module the kernels' fingerprint does
         not cover, so it comes as an argument), the RK4 start tableau of
-        :func:`~mbh._adapters.inhouse.compiled.step_tableau`, history (points, 2, 2n): (y, f) of the
+        :func:`~mbh._adapters.inhouse.stepping.kernel_step.step_tableau`, history (points, 2, 2n): (y, f) of the
         last steps' starts, newest first, held (1,) int64: points in it, J (2n, 2n), the LU
         factors of I − hβ₀J (2n, 2n), their row pivots (2n,) int64, Newton state (2,)); the
         arrays after the first four are updated in place.
@@ -132,7 +135,7 @@ def _acceleration_into(q, v, t, model, counters, out):
     """q̈ (n,) into ``out``: the generated right-hand side where it serves, else the kernels'
     (counted in ``kernel_calls``); the evaluation itself is not counted here."""
     if model[GENERATED][ACCELERATION](q, v, t, out) == 0:
-        out[:] = _kernel_acceleration(q, v, t, model, counters)
+        out[:] = kernel_acceleration(q, v, t, model, counters)
 
 
 @njit(cache=True)
@@ -186,7 +189,7 @@ def _iterate(t, psi, gamma, lu, pivots, newton, stop_when_slow, model, counters,
     n = size // 2
     previous = -1.0
     for _ in range(max_iter):
-        _count_evaluation(counters)
+        count_evaluation(counters)
         _acceleration_into(y_new[:n], y_new[n:], t, model, counters, a)
         for i in range(size):
             f = y_new[n + i] if i < n else a[i - n]
@@ -243,7 +246,7 @@ def _start_step(q, v, t, method, model, counters, a):
     holds every point the method reads (else the step is an RK4 start step)."""
     history, held = method[4], method[5]
     n = q.shape[0]
-    _count_evaluation(counters)
+    count_evaluation(counters)
     _acceleration_into(q, v, t, model, counters, a)
     points = history.shape[0]
     for j in range(points - 1, 0, -1):
@@ -281,7 +284,7 @@ def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buff
     a, psi, y_new = buffers[0], buffers[1], buffers[2]
     n = q.shape[0]
     if not _start_step(q, v, t, method, model, counters, a):
-        q_new, v_new = _nystrom_step(q, v, t, dt, start_tableau, model, partition, PLAIN,
+        q_new, v_new = kernel_nystrom_step(q, v, t, dt, start_tableau, model, partition, PLAIN,
                                      counters)
         return q_new, v_new, True
     for e in range(2 * n):
@@ -294,10 +297,10 @@ def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buff
 @njit(cache=True, inline="always")
 def _projected(q, v, t, projection, model, counters):
     """``direct``'s projection of the new state (q, q̇) at t (eqs. 127, 137) by
-    :func:`~mbh._adapters.inhouse.compiled._project`, ``projection`` (proj_tol, proj_max_iter, cut):
+    :func:`~mbh._adapters.inhouse.stepping.kernel_step.project_state`, ``projection`` (proj_tol, proj_max_iter, cut):
     the corrected (q, q̇), new arrays."""
     proj_tol, proj_max_iter, cut = projection
-    q_new, v_new, _ = _project(q, v, t, model[ROWS], proj_tol, proj_max_iter, cut,
+    q_new, v_new, _ = project_state(q, v, t, model[ROWS], proj_tol, proj_max_iter, cut,
                                model[CONSTRAINT_ARGS], model[SPARSITY], model[GENERATED],
                                counters)
     return q_new, v_new
@@ -309,13 +312,13 @@ def run_samples(q, v, t0, dt, first, targets, method, model, stabilisation, proj
     """A fixed-step run of an implicit linear multistep method (Adams–Moulton, BDF: β₀ ≠ 0;
     the explicit ones run on :func:`run_explicit_samples`) from the state after step ``first``
     through every step index of ``targets``, keeping the state at each: the arguments and
-    results of :func:`mbh._adapters.inhouse.compiled.run_samples`, with ``method``
+    results of :func:`mbh._adapters.inhouse.stepping.compiled.run_samples`, with ``method``
     (:func:`method_arguments`) in the tableau's place; ``stabilisation`` is
-    :data:`~mbh._adapters.inhouse.compiled.PLAIN` or :data:`~mbh._adapters.inhouse.compiled.PROJECTED`,
+    :data:`~mbh._adapters.inhouse.stepping.loop_codes.PLAIN` or :data:`~mbh._adapters.inhouse.stepping.loop_codes.PROJECTED`,
     ``check_due`` and ``passage`` are not read (no partitioning, no placed passages: the
     Python path places none for multistep methods).  A Newton failure ends the run with
-    :data:`~mbh._adapters.inhouse.compiled.FAILED_NEWTON`, any other exception in a step with
-    :data:`~mbh._adapters.inhouse.compiled.FAILED_LINALG`."""
+    :data:`~mbh._adapters.inhouse.stepping.loop_codes.FAILED_NEWTON`, any other exception in a step with
+    :data:`~mbh._adapters.inhouse.stepping.loop_codes.FAILED_LINALG`."""
     n = q.shape[0]
     states = np.empty((1, 2, n))
     buffers = (np.empty(n), np.empty(2 * n), np.empty(2 * n), np.empty(2 * n), np.empty(n))
@@ -373,7 +376,7 @@ def run_explicit_samples(q, v, t0, dt, first, targets, method, model, stabilisat
                     q_new[e] = _explicit_part(alpha, beta, history, dt, e)
                     v_new[e] = _explicit_part(alpha, beta, history, dt, n + e)
             else:
-                q_new, v_new = _nystrom_step(q, v, t, dt, start_tableau, model, partition,
+                q_new, v_new = kernel_nystrom_step(q, v, t, dt, start_tableau, model, partition,
                                              PLAIN, counters)
                 made = -1
             if stabilisation == PROJECTED:

@@ -1,14 +1,14 @@
-"""The in-house stepper on the compiled path (:mod:`mbh._adapters.inhouse.compiled`): a whole run, or
+"""The in-house stepper on the compiled path (:mod:`mbh._adapters.inhouse.stepping.compiled`): a whole run, or
 for partitioning each stretch between two sample times, in a single compiled call, so no Python
 runs per step.
 
 Used for the fixed-step explicit one-step methods (euler, symplectic-euler, heun, rk4, rkn4, rk5,
 rk8) with the ``none``, ``baumgarte``, ``direct`` and ``partition`` formulations, and for the
-linear multistep methods (ab1–ab5, am1–am5, bdf1–bdf4: :mod:`mbh._adapters.inhouse.compiled_multistep`)
+linear multistep methods (ab1–ab5, am1–am5, bdf1–bdf4: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`)
 with ``none``, ``baumgarte`` and ``direct``, unless the method says ``loop=python``; every other
-method runs on :class:`~mbh._adapters.inhouse.driver.InhouseStepper`.
+method runs on :class:`~mbh._adapters.inhouse.stepping.driver.InhouseStepper`.
 With ``loop=auto`` (the default) or ``generated`` each stage's q̈, the projection's parts and ρ̂
-come from functions generated for the formulation (:mod:`mbh._adapters.inhouse.generated`: the same
+come from functions generated for the formulation (:mod:`mbh._adapters.inhouse.codegen.generated`: the same
 numbers, a step 3–4 times faster; :data:`LOOPS` says when ``auto`` compiles them), with
 ``loop=compiled`` from the generic kernels.
 The formulation object is built as on the Python path (its rows, gains, projection cut, split and
@@ -42,12 +42,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from mbh._adapters.base import RunFailure, RunGrid
-from mbh._adapters.inhouse import compiled, compiled_multistep, generated, on_demand
-from mbh._adapters.inhouse.driver import FormulationStepper
-from mbh._adapters.inhouse.fold import Passages
-from mbh._adapters.inhouse.partition import CoordinatePartitioning
-from mbh._adapters.inhouse.stabilisation import Baumgarte, DirectCorrection, NoStabilisation
-from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.inhouse.stepping import (compiled, compiled_multistep, kernel_step,
+                                            loop_codes, on_demand)
+from mbh._adapters.inhouse.codegen import generated
+from mbh._adapters.inhouse.stepping.driver import FormulationStepper
+from mbh._adapters.inhouse.formulations.fold import Passages
+from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
+from mbh._adapters.inhouse.formulations.stabilisation import (
+    Baumgarte, DirectCorrection, NoStabilisation)
+from mbh._adapters.inhouse.bodies.states import body_states
 from mbh._adapters.integrators import integrator_class
 from mbh._adapters.integrators.multistep import LinearMultistep
 from mbh._adapters.integrators.newton import non_convergence
@@ -57,9 +60,9 @@ from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
 
 #: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_steps`.
-COMPILED_FORMULATIONS = {NoStabilisation.name: compiled.PLAIN, Baumgarte.name: compiled.PLAIN,
-                         DirectCorrection.name: compiled.PROJECTED,
-                         CoordinatePartitioning.name: compiled.PARTITIONED}
+COMPILED_FORMULATIONS = {NoStabilisation.name: loop_codes.PLAIN, Baumgarte.name: loop_codes.PLAIN,
+                         DirectCorrection.name: loop_codes.PROJECTED,
+                         CoordinatePartitioning.name: loop_codes.PARTITIONED}
 
 #: The ``loop`` method parameter: which stepping path runs a method that has a compiled one
 #: (``generated``: the compiled loop with functions generated for the formulation, compiled on
@@ -128,15 +131,15 @@ class CompiledStepper(FormulationStepper):
             # evaluates once at least).
             calls_per_step = 1 if method_class.beta[0] == 0.0 else 2
         else:
-            self._method = compiled.step_tableau(method_class.tableau)
+            self._method = kernel_step.step_tableau(method_class.tableau)
             calls_per_step = method_class.tableau.c.size
         self.passages = Passages.of(formulation, method_class)
         params = formulation.params
         self._projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
-                             float(formulation.cut)) if self._code == compiled.PROJECTED
+                             float(formulation.cut)) if self._code == loop_codes.PROJECTED
                             else (0.0, 0, 0.0))
         self._limit = float(integrator_params["divergence_limit"])
-        self._counters = np.zeros(compiled.COUNTERS, dtype=np.int64)
+        self._counters = np.zeros(loop_codes.COUNTERS, dtype=np.int64)
         self._check_due = np.zeros(1, dtype=np.int64)
         self._partition = None
         self._restart(*self._start_state)
@@ -154,7 +157,7 @@ class CompiledStepper(FormulationStepper):
         #: sample (the common case): built here, outside the timed stepping (~35 µs for 1,001).
         self._rows_from_start = dict(zip(self._sample_steps.tolist(),
                                          range(self._sample_steps.size)))
-        self._partitioned = self._code == compiled.PARTITIONED
+        self._partitioned = self._code == loop_codes.PARTITIONED
         self._dispatcher = self._full_loop(method_class)
         self._model = self._model_tuple(generated.NOTHING, False)  # the types of the real one
         wanted = self._wanted_functions()
@@ -193,7 +196,7 @@ class CompiledStepper(FormulationStepper):
                 else compiled_multistep.run_samples)
 
     def _model_tuple(self, functions: tuple, every_one: bool) -> tuple:
-        """The compiled loop's model (:data:`compiled.GAINS` …) with the generated
+        """The compiled loop's model (:data:`loop_codes.GAINS` …) with the generated
         ``functions``; ``every_one``: every function the formulation calls generated."""
         formulation = self.formulation
         return (np.asarray(formulation.gains, dtype=float),
@@ -230,10 +233,10 @@ class CompiledStepper(FormulationStepper):
         right-hand side always, the projection's parts for ``direct``, ρ̂ for ``none`` and
         ``baumgarte`` with placed passages on."""
         wanted = [generated.ACCELERATION]
-        if self._code == compiled.PROJECTED:
+        if self._code == loop_codes.PROJECTED:
             wanted += [generated.RESIDUAL_SIZE, generated.POSITION_CORRECTION,
                        generated.VELOCITY_CORRECTION]
-        elif self._code == compiled.PLAIN and self.passages.arrays[0][0] > 0.0:
+        elif self._code == loop_codes.PLAIN and self.passages.arrays[0][0] > 0.0:
             wanted.append(generated.INDICATOR)
         return wanted
 
@@ -249,7 +252,7 @@ class CompiledStepper(FormulationStepper):
     def _restart(self, q_full: np.ndarray, v_full: np.ndarray) -> None:
         """Integrated state from a full one; a (new) split's state for partitioning."""
         formulation = self.formulation
-        if self._code != compiled.PARTITIONED:
+        if self._code != loop_codes.PARTITIONED:
             self.q, self.v = q_full.copy(), v_full.copy()
             if self._partition is None:
                 self._partition = _no_partition()
@@ -268,12 +271,12 @@ class CompiledStepper(FormulationStepper):
         """Full (q, q̇) of the integrated state at its time ``t``: for every formulation but
         partitioning the stored sample the last :meth:`_step_to` reached (row ``_row`` of the
         call's output), else (q, v)."""
-        if self._code != compiled.PARTITIONED:
+        if self._code != loop_codes.PARTITIONED:
             if self._row is None:
                 return self.q, self.v
             return self._samples.q[self._row], self._samples.v[self._row]
-        return compiled.expand(self.q, self.v, t, self._model[compiled.ROWS],
-                               self._model[compiled.CONSTRAINT_ARGS],
+        return kernel_step.expand(self.q, self.v, t, self._model[loop_codes.ROWS],
+                               self._model[loop_codes.CONSTRAINT_ARGS],
                                self._partition, self._counters)
 
     # -- stepping ------------------------------------------------------------------------------
@@ -301,10 +304,10 @@ class CompiledStepper(FormulationStepper):
         while True:
             self.q, self.v, self.steps, status = self._run(target)
             self.t_good = self.steps * self.grid.dt
-            if status != compiled.REPARTITION:
+            if status != loop_codes.REPARTITION:
                 break
             self._repartition()
-        if status != compiled.RUNNING:
+        if status != loop_codes.RUNNING:
             raise RunFailure(*self._failure(status))
 
     def _run_to(self, target: int) -> int:
@@ -345,7 +348,7 @@ class CompiledStepper(FormulationStepper):
             q, v, done, status, reached = self._full_entry()(*args)
         else:
             q, v, done, status, reached = self._generated_entry(*self._generated_args(args))
-            if status == compiled.DECLINED:  # the full loop goes on from the step handed over
+            if status == loop_codes.DECLINED:  # the full loop goes on from the step handed over
                 self.steps = done
                 q, v, done, status, more = self._full_entry()(
                     *self._continued_args(args, q, v, done, reached))
@@ -362,7 +365,7 @@ class CompiledStepper(FormulationStepper):
         :func:`compiled.run_samples` (:meth:`_samples_args`)."""
         (q, v, t0, dt, first, targets, tableau, model, code, projection, _, _, limit, passage,
          counters, q_out, v_out) = args
-        return (q, v, t0, dt, first, targets, tableau, model[compiled.GENERATED], code,
+        return (q, v, t0, dt, first, targets, tableau, model[loop_codes.GENERATED], code,
                 projection, limit, passage, counters, q_out, v_out)
 
     @staticmethod
@@ -392,20 +395,20 @@ class CompiledStepper(FormulationStepper):
     def _failure(self, status: int) -> tuple[str, str]:
         """(status, reason) of a failure code, worded as the Python path words it."""
         failure = self._partition[8]
-        if status == compiled.DIVERGED_LIMIT:
+        if status == loop_codes.DIVERGED_LIMIT:
             return "diverged", f"state norm exceeds divergence_limit={self._limit:g}"
-        if status == compiled.DIVERGED_NONFINITE:
+        if status == loop_codes.DIVERGED_NONFINITE:
             return "diverged", "non-finite state"
-        if status == compiled.FAILED_NEWTON and self._multistep:
+        if status == loop_codes.FAILED_NEWTON and self._multistep:
             tol, max_iter, _ = self._method[2]  # method_arguments' (tol, max_iter, slow rate)
             return "failed", "StepFailure: " + non_convergence(max_iter, tol,
                                                                (self.steps + 1) * self.grid.dt)
-        if status == compiled.FAILED_NEWTON:
+        if status == loop_codes.FAILED_NEWTON:
             return "failed", (f"StepFailure: dependent coordinates did not converge (max |Φ| = "
                               f"{failure[1]:.3g}) at t = {failure[2]:g}")
-        if status == compiled.FAILED_RANK:
+        if status == loop_codes.FAILED_RANK:
             return "failed", (f"StepFailure: constraint Jacobian lost rank ({int(failure[1])} < "
-                              f"{self._model[compiled.ROWS].size}): singular configuration")
+                              f"{self._model[loop_codes.ROWS].size}): singular configuration")
         return "failed", "LinAlgError: a factorisation failed in the compiled step"
 
     # -- reading -------------------------------------------------------------------------------
@@ -416,10 +419,10 @@ class CompiledStepper(FormulationStepper):
         trajectory = super().run(grid, n_bodies)
         counters = self._counters
         accelerations, step_ends = self._generated_parts
-        notes = [hand_back_note(int(counters[compiled.KERNEL_CALLS]),
-                                int(counters[compiled.RHS_EVALS])) if accelerations else None,
-                 step_end_note(int(counters[compiled.STEP_END_KERNELS]),
-                               int(counters[compiled.STEP_ENDS])) if step_ends else None]
+        notes = [hand_back_note(int(counters[loop_codes.KERNEL_CALLS]),
+                                int(counters[loop_codes.RHS_EVALS])) if accelerations else None,
+                 step_end_note(int(counters[loop_codes.STEP_END_KERNELS]),
+                               int(counters[loop_codes.STEP_ENDS])) if step_ends else None]
         trajectory.notes.extend(note for note in notes if note)
         return trajectory
 
@@ -430,14 +433,14 @@ class CompiledStepper(FormulationStepper):
 
     def counters(self) -> dict:
         own = self.formulation.counters
-        return {"rhs_evals": int(self._counters[compiled.RHS_EVALS]),
+        return {"rhs_evals": int(self._counters[loop_codes.RHS_EVALS]),
                 "jacobian_evals": own["jacobian_evals"]
-                + int(self._counters[compiled.JACOBIAN_EVALS]),
+                + int(self._counters[loop_codes.JACOBIAN_EVALS]),
                 "factorizations": own["factorizations"]
-                + int(self._counters[compiled.FACTORIZATIONS]),
+                + int(self._counters[loop_codes.FACTORIZATIONS]),
                 "newton_iterations": own["newton_iterations"]
-                + int(self._counters[compiled.NEWTON_ITERATIONS]),
-                "kernel_calls": int(self._counters[compiled.KERNEL_CALLS]),
+                + int(self._counters[loop_codes.NEWTON_ITERATIONS]),
+                "kernel_calls": int(self._counters[loop_codes.KERNEL_CALLS]),
                 "repartitions": getattr(self.formulation, "repartitions", 0),
                 "passages": int(self.passages.count[0])}
 
@@ -501,11 +504,11 @@ class _Samples:
 
     def failed_before(self, target: int) -> bool:
         """Whether the call ended in a failure before step ``target``."""
-        return self.end[3] != compiled.RUNNING and target > self.end[2]
+        return self.end[3] != loop_codes.RUNNING and target > self.end[2]
 
 
 def _no_partition() -> tuple:
-    """The (unused) partition state of the other formulations, typed as :func:`compiled.expand`
+    """The (unused) partition state of the other formulations, typed as :func:`kernel_step.expand`
     expects it."""
     empty = np.zeros(0, dtype=np.int64)
     return (empty, empty, np.zeros(0), np.zeros((0, 0)), np.zeros(1, dtype=np.int64), 0.0, 0, 0.0,

@@ -17,12 +17,12 @@ from __future__ import annotations
 import numpy as np
 
 from mbh._adapters.base import RunFailure, RunGrid, Stepper
-from mbh._adapters.inhouse import on_demand
-from mbh._adapters.inhouse.constraints import layout_of
-from mbh._adapters.inhouse.fold import Passages
-from mbh._adapters.inhouse.kinematics import common_start
-from mbh._adapters.inhouse.stabilisation import Formulation
-from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.inhouse.stepping import on_demand
+from mbh._adapters.inhouse.bodies.constraints import layout_of
+from mbh._adapters.inhouse.formulations.fold import Passages
+from mbh._adapters.inhouse.bodies.kinematics import common_start
+from mbh._adapters.inhouse.formulations.stabilisation import Formulation
+from mbh._adapters.inhouse.bodies.states import body_states
 from mbh._adapters.integrators import RUNNING, make_integrator
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
@@ -41,7 +41,7 @@ PROJECTED_SAMPLES_NOTE = ("adaptive steps with projection: states between steps 
 
 class FormulationStepper(Stepper):
     """What the in-house steppers share: the body layout, the common start
-    (:func:`~mbh._adapters.inhouse.kinematics.common_start`) and the formulation built there.
+    (:func:`~mbh._adapters.inhouse.bodies.kinematics.common_start`) and the formulation built there.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The compiled path of the linear multistep methods (adapters/inhouse/compiled_multistep.py)
+"""The compiled path of the linear multistep methods (adapters/inhouse/stepping/compiled_multistep.py)
 against the Python path (adapters/integrators/multistep.py on the Newton solver of newton.py),
 and its written-out LU factorisation.
 
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from mbh._adapters import get_adapter
-from mbh._adapters.inhouse.compiled_multistep import lu_factor_into, lu_solve_into
+from mbh._adapters.inhouse.stepping.compiled_multistep import lu_factor_into, lu_solve_into
 from mbh._harness.model import scenario
 from mbh._harness.model.timegrid import sample_times
 from mbh._harness.references.build import reference_trajectory

@@ -21,8 +21,9 @@ import pytest
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunGrid
-from mbh._adapters.inhouse import compiled
-from mbh._adapters.inhouse.linalg import certified_spd_solve, min_norm_solve, truncated_solve
+from mbh._adapters.inhouse.stepping import compiled
+from mbh._adapters.inhouse.numerics.linalg import (certified_spd_solve, min_norm_solve,
+                                                   truncated_solve)
 from mbh._harness.model import scenario
 from mbh._harness.model.timegrid import sample_times
 from tests.helpers import LARGE_TRACES, PATH_BOUND
@@ -153,7 +154,7 @@ def test_the_written_out_cholesky_factor_matches_lapacks(span):
     """Sizes 1 … 25 with condition numbers 10^span.  Measured largest difference relative to
     max |L| (2026-11-25): 1.8e-15, 2.2e-12, 1.9e-10 (a different summation order's round-off,
     growing like ε·√κ on the trailing pivots); bound 100 ε √κ."""
-    from mbh._adapters.inhouse.linalg import _cholesky
+    from mbh._adapters.inhouse.numerics.linalg import _cholesky
 
     for k in range(1, 26):
         matrix = _spd(np.logspace(0, -span, k), k)
@@ -167,7 +168,7 @@ def test_the_written_out_cholesky_factor_matches_lapacks(span):
 @pytest.mark.parametrize("last", [-1e-3, -1.0])
 def test_the_written_out_cholesky_refuses_what_lapack_refuses(last):
     """A clearly negative eigenvalue: no positive factor, as LAPACK's potrf decides."""
-    from mbh._adapters.inhouse.linalg import _cholesky
+    from mbh._adapters.inhouse.numerics.linalg import _cholesky
 
     matrix = _spd(np.array([1.0, 0.5, last]), 4)
     with pytest.raises(np.linalg.LinAlgError):
@@ -188,7 +189,7 @@ def test_the_comparison_bound_bounds_the_inverse_norm():
     """‖L⁻¹‖₂² ≤ the O(k²) comparison-matrix bound for Cholesky factors of sizes 1 … 30 with
     condition numbers up to 1e12: a theorem, so the only slack allowed is round-off (1e-12
     relative)."""
-    from mbh._adapters.inhouse.linalg import _comparison_bound
+    from mbh._adapters.inhouse.numerics.linalg import _comparison_bound
 
     for k in range(1, 31):
         lower = np.linalg.cholesky(_spd(np.logspace(0, -(k % 13), k), k))
@@ -201,7 +202,7 @@ def test_what_the_comparison_bound_overestimates_the_frobenius_bound_certifies()
     but M(L)⁻¹ has entries 2^(i−j−1), so the O(k²) bound is ~1e23 and only the ‖L⁻¹‖_F bound can
     certify S = LLᵀ (‖S‖_F·79 ≈ 5e4, far inside 1/(10·cut) = 1e9).  κ₂(S) ≈ 2.6e3: a relative
     error of 1e-11 leaves ~20 times κ·ε."""
-    from mbh._adapters.inhouse.linalg import _comparison_bound
+    from mbh._adapters.inhouse.numerics.linalg import _comparison_bound
 
     lower = np.tril(np.ones((40, 40)))
     assert _comparison_bound(lower) > 1e20
@@ -215,7 +216,7 @@ def test_the_loop_products_match_numpys():
     """The BLAS-free products of the range-space solves on a sparse 8 × 9 Jacobian-like matrix;
     measured differences ≤ 4.5e-16 on entries of ~1-10 (summation order), bound 1e-14; the
     weighted Gram matrix is exactly symmetric."""
-    from mbh._adapters.inhouse.linalg import matvec, rmatvec, weighted_gram
+    from mbh._adapters.inhouse.numerics.linalg import matvec, rmatvec, weighted_gram
 
     rng = np.random.default_rng(5)
     matrix = rng.normal(size=(8, 9))
@@ -250,7 +251,7 @@ def test_min_norm_solve_matches_the_truncated_svd_with_and_without_a_certificate
                                   truncated_solve(nearly, rhs, 1e-3))
 
 
-# --- the banded solves of large planar mechanisms (adapters/inhouse/banded.py) ----------------
+# --- the banded solves of large planar mechanisms (adapters/inhouse/numerics/banded.py) ----------------
 
 @pytest.mark.parametrize("n_cells", [16, 64])
 def test_banded_solves_match_the_dense_ones_on_the_n_fourbar(n_cells):
@@ -259,11 +260,12 @@ def test_banded_solves_match_the_dense_ones_on_the_n_fourbar(n_cells):
     and 5.3e-15 (N = 64) on values of ~1; projections 5.8e-15 and 1.1e-14 on ~2.6.  Bound 1e-11:
     a different factorisation's round-off times the condition number (κ(Φ_qΦ_qᵀ) = 9e3 at N = 64)
     with margin."""
-    from mbh._adapters.inhouse.banded import BANDED_MIN_ROWS, min_norm_correction
-    from mbh._adapters.inhouse.dynamics import (ACCELERATION_CUT, index1_acceleration,
-                                           mass_and_forces_kernel, range_space_acceleration)
-    from mbh._adapters.inhouse.kinematics import common_start
-    from mbh._adapters.inhouse.stabilisation import NoStabilisation
+    from mbh._adapters.inhouse.numerics.banded import BANDED_MIN_ROWS, min_norm_correction
+    from mbh._adapters.inhouse.formulations.dynamics import (ACCELERATION_CUT, index1_acceleration,
+                                                            range_space_acceleration)
+    from mbh._adapters.inhouse.formulations.mass_and_forces import mass_and_forces_kernel
+    from mbh._adapters.inhouse.bodies.kinematics import common_start
+    from mbh._adapters.inhouse.formulations.stabilisation import NoStabilisation
 
     mech = scenario.load(f"n_fourbar@{n_cells}")
     start = common_start(mech)
@@ -291,10 +293,12 @@ def test_the_euler_parameter_block_solve_matches_the_dense_one(name):
     7.2 (fourbar_spatial), 4.4e-14 on 12.4 (slider_crank) (2026-11-25); 1.8e-14 and 2.3e-14 with
     each body's rotational block inverse made once (2026-11-27); bound 1e-11 as for the banded
     solves above."""
-    from mbh._adapters.inhouse.dynamics import (ACCELERATION_CUT, mass_and_forces_kernel,
-                                           range_space_acceleration, spatial_block_acceleration)
-    from mbh._adapters.inhouse.kinematics import common_start
-    from mbh._adapters.inhouse.stabilisation import NoStabilisation
+    from mbh._adapters.inhouse.formulations.dynamics import (
+        ACCELERATION_CUT, range_space_acceleration)
+    from mbh._adapters.inhouse.formulations.mass_and_forces import (
+        mass_and_forces_kernel, spatial_block_acceleration)
+    from mbh._adapters.inhouse.bodies.kinematics import common_start
+    from mbh._adapters.inhouse.formulations.stabilisation import NoStabilisation
 
     mech = scenario.load(name)
     q = common_start(mech).q
@@ -316,7 +320,7 @@ def test_the_euler_parameter_block_solve_matches_the_dense_one(name):
 
 
 def test_the_bandwidth_of_the_n_fourbar_does_not_grow_with_n():
-    from mbh._adapters.inhouse.constraints import ConstraintSystem
+    from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
 
     widths = {n: ConstraintSystem(scenario.load(f"n_fourbar@{n}")).sparsity.bandwidth
               for n in (4, 16, 64)}

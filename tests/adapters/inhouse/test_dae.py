@@ -17,11 +17,13 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from mbh._adapters.inhouse.constraints import ConstraintSystem
-from mbh._adapters.inhouse import kernels
-from mbh._adapters.inhouse.dae import DaeModel, IdaIntegration, IdaResult, ida_params, simulate_ida
-from mbh._adapters.inhouse.dynamics import Dynamics, mass_and_forces_kernel, solve_augmented
-from mbh._adapters.inhouse.kinematics import assemble
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
+from mbh._adapters.inhouse.bodies import kernels
+from mbh._adapters.inhouse.formulations.dae import (DaeModel, IdaIntegration, IdaResult, ida_params,
+                                                    simulate_ida)
+from mbh._adapters.inhouse.formulations.dynamics import solve_augmented
+from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics, mass_and_forces_kernel
+from mbh._adapters.inhouse.bodies.kinematics import assemble
 from mbh._harness.model import scenario
 
 T_END = 4.0

@@ -15,7 +15,8 @@ from mbh._harness.model import scenario
 from mbh._harness.measure.energy import energy_balance
 from mbh._harness.measure.metrics import case_metrics
 from mbh._harness.model.outputs import output_series
-from mbh._harness.references.build import AGREEMENT_LIMIT, ROUTE_B, reference_trajectory, route_difference
+from mbh._harness.references.build import (AGREEMENT_LIMIT, ROUTE_B, reference_trajectory,
+                                           route_difference)
 from mbh._harness.model.timegrid import sample_times
 from mbh._harness.model.trajectory import Trajectory
 
@@ -170,10 +171,10 @@ def test_unknown_method_lists_the_valid_ones():
 def test_newton_euler_form_matches_the_euler_parameter_form(name):
     """At a moving state, the Newton–Euler accelerations (Rouvinen 2003, §3.3) mapped back to θ̈ equal the
     Euler-parameter form's q̈ (measured agreement 2e-14 on |q̈| ~ 8)."""
-    from mbh._adapters.inhouse.dynamics import g_bar
-    from mbh._adapters.inhouse.kinematics import assemble
-    from mbh._adapters.inhouse.newton_euler import NewtonEuler
-    from mbh._adapters.inhouse.stabilisation import NoStabilisation
+    from mbh._adapters.inhouse.formulations.mass_and_forces import g_bar
+    from mbh._adapters.inhouse.bodies.kinematics import assemble
+    from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
+    from mbh._adapters.inhouse.formulations.stabilisation import NoStabilisation
 
     mech = scenario.load(name)
     assembly = assemble(mech, value=0.3, rate=2.0)

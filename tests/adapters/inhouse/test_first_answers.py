@@ -5,7 +5,7 @@ run with ``best`` long enough for ``loop=auto`` to generate its functions.
 
 Either the generated functions serve (``kernel_calls`` ≤ 1 % of the right-hand sides), or a note
 names why a function could not be had, and a function that would hand back every call is not
-compiled (its source is checked at the start first, adapters/inhouse/generated.py).  The first
+compiled (its source is checked at the start first, adapters/inhouse/codegen/generated.py).  The first
 two have redundant equations; their runs must still be ``ok`` and on the constraints.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import pytest
 
 from mbh._adapters import get_adapter
-from mbh._adapters.inhouse import generated_store
+from mbh._adapters.inhouse.codegen import generated_store
 from mbh._harness.measure.metrics import constraint_violations
 from mbh._harness.model.timegrid import sample_times
 from tests.helpers import bennett_linkage, parallel_revolute_fourbar, spring_damper_tree
@@ -52,7 +52,7 @@ def test_a_new_mechanisms_best_run_is_served_or_says_why(name, tmp_path, monkeyp
 def test_the_drawn_mechanisms_are_what_their_descriptions_say():
     """Rank, mobility and redundant equations of the drawn mechanisms (the in-house rank
     analysis at the assembled start): Bennett's loop has mobility 1 with Grübler's count −2."""
-    from mbh._adapters.inhouse.kinematics import check
+    from mbh._adapters.inhouse.bodies.kinematics import check
 
     found = {name: check(make()) for name, make in MECHANISMS.items()}
     summary = {name: (row["mobility"], row["grubler_mobility"], row["redundant_equations"])

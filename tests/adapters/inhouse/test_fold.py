@@ -1,4 +1,4 @@
-"""Placed passages of singular positions (:mod:`mbh._adapters.inhouse.fold`): the plan's arithmetic
+"""Placed passages of singular positions (:mod:`mbh._adapters.inhouse.formulations.fold`): the plan's arithmetic
 on made-up indicator histories, and its effect on ``double_fourbar``'s ten passages."""
 
 from __future__ import annotations
@@ -9,8 +9,8 @@ from tests.helpers import reduced_tip
 from tests.helpers import PATH_BOUND
 
 from mbh._adapters import get_adapter
-from mbh._adapters.inhouse.fold import (SAFE_INDICATOR, passage_placement, passage_times,
-                                   plan_passage)
+from mbh._adapters.inhouse.formulations.fold import (SAFE_INDICATOR, passage_placement,
+                                                     passage_times, plan_passage)
 from mbh._adapters.integrators import integrator_class
 from mbh._harness.model import scenario
 from mbh._harness.model.outputs import output_series

@@ -1,4 +1,4 @@
-"""Generated kernels (adapters/inhouse/generated.py, tracing.py): the traced straight-line
+"""Generated kernels (adapters/inhouse/codegen/generated.py, tracing.py): the traced straight-line
 functions against the generic kernels they were traced from, and when ``loop=auto`` makes them.
 
 Bounds: a generated function makes its kernel's floating-point operations on the same operands
@@ -22,9 +22,10 @@ from numba import cfunc, njit
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunFailure, RunGrid
-from mbh._adapters.inhouse import (compiled_stepper, dynamics, generated, generated_store,
-                              on_demand, tracing)
-from mbh._adapters.inhouse.compiled_stepper import hand_back_note, step_end_note
+from mbh._adapters.inhouse.codegen import generated, generated_store, tracing
+from mbh._adapters.inhouse.formulations import dynamics, mass_and_forces
+from mbh._adapters.inhouse.stepping import compiled_stepper, on_demand
+from mbh._adapters.inhouse.stepping.compiled_stepper import hand_back_note, step_end_note
 from mbh._harness.model import scenario
 from mbh._harness.neutral.assembly import AssemblyError
 from mbh._harness.testing.strategies import aligned_mechanisms, mechanisms
@@ -451,7 +452,7 @@ def test_a_slender_spatial_body_is_traced_through_the_augmented_mass_form():
     mech = _slender_pendulum()
     formulation, start = _formulation(mech)
     nc, masses, inertias = formulation.dynamics.kernel_args[:3]
-    assert not dynamics._inertia_certified(masses[1], inertias[1], dynamics.ACCELERATION_CUT)
+    assert not mass_and_forces._inertia_certified(masses[1], inertias[1], dynamics.ACCELERATION_CUT)
     function = generated.compiled_function(generated.ACCELERATION, formulation, *start)
     rng = np.random.default_rng(3)
     for t in (0.0, 0.1, 0.2):
@@ -501,7 +502,7 @@ def test_the_cholesky_form_of_the_augmented_mass_solve_matches_lu():
     jacobian = constraints.jacobian(q, 0.0)
     r = np.random.default_rng(0).normal(size=q.size)
     v = r - np.linalg.pinv(jacobian) @ (jacobian @ r)
-    mass, force = dynamics.mass_and_forces_kernel(q, v, *formulation.dynamics.kernel_args)
+    mass, force = mass_and_forces.mass_and_forces_kernel(q, v, *formulation.dynamics.kernel_args)
     gamma = constraints.gamma(q, v, 0.0)
     cholesky = dynamics.augmented_mass_acceleration(mass, jacobian, force, gamma,
                                                     dynamics.ACCELERATION_CUT)

@@ -1,4 +1,4 @@
-"""The folder of generated functions (adapters/inhouse/generated_store.py): a damaged entry is
+"""The folder of generated functions (adapters/inhouse/codegen/generated_store.py): a damaged entry is
 rebuilt, never fatal; the folder stays under its bound, the least recently used entries going
 first; the bound's setting is checked."""
 
@@ -13,11 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mbh._adapters.inhouse import generated_store
+from mbh._adapters.inhouse.codegen import generated_store
 
-#: A generated module as adapters/inhouse/generated.py writes one, compiled in ~1 s.
+#: A generated module as adapters/inhouse/codegen/generated.py writes one, compiled in ~1 s.
 SOURCE = ("import numpy as np\nfrom numba import cfunc\n\n"
-          "from mbh._adapters.inhouse.generated import SIGNATURE\n\n\n"
+          "from mbh._adapters.inhouse.codegen.generated import SIGNATURE\n\n\n"
           "@cfunc(SIGNATURE, cache=True)\n"
           "def acceleration(q, v, t, out):\n    out[0] = 2.0 * q[0] + v[0] + t\n    return 1\n")
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mbh._adapters.inhouse.constraints import ConstraintSystem, layout_of
-from mbh._adapters.inhouse.kinematics import InhouseAssemblyError, assemble, check, rank_report
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem, layout_of
+from mbh._adapters.inhouse.bodies.kinematics import (InhouseAssemblyError, assemble, check,
+                                                     rank_report)
 from mbh._harness.model import scenario
 
 SHIPPED = scenario.scenario_names()

@@ -1,5 +1,5 @@
 """The certified pivoted solve of redundant range-space systems
-(:func:`mbh._adapters.inhouse.linalg.semidefinite_solve`): the truncated SVD's solution where it
+(:func:`mbh._adapters.inhouse.numerics.linalg.semidefinite_solve`): the truncated SVD's solution where it
 certifies, no answer where it cannot, and the right accelerations on redundant mechanisms."""
 
 from __future__ import annotations
@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mbh._adapters.inhouse.kinematics import assemble
-from mbh._adapters.inhouse.linalg import NULL_LEVEL, certified_solve, semidefinite_solve, truncated_solve
-from mbh._adapters.inhouse.stabilisation import NoStabilisation
+from mbh._adapters.inhouse.bodies.kinematics import assemble
+from mbh._adapters.inhouse.numerics.linalg import (NULL_LEVEL, certified_solve, semidefinite_solve,
+                                                   truncated_solve)
+from mbh._adapters.inhouse.formulations.stabilisation import NoStabilisation
 from mbh._harness.model import scenario
 from tests.helpers import parallel_revolute_fourbar
 

@@ -1,8 +1,8 @@
 """The in-house solves at singular positions (issue "Hard scenes" item 1) and the failure labels.
 
-The rank-revealing pieces: :func:`mbh._adapters.inhouse.linalg.truncated_solve`, the range-space
-acceleration :func:`mbh._adapters.inhouse.dynamics.range_space_acceleration`, the truncated projection
-of :class:`mbh._adapters.inhouse.stabilisation.DirectCorrection`; and
+The rank-revealing pieces: :func:`mbh._adapters.inhouse.numerics.linalg.truncated_solve`, the range-space
+acceleration :func:`mbh._adapters.inhouse.formulations.dynamics.range_space_acceleration`, the truncated projection
+of :class:`mbh._adapters.inhouse.formulations.stabilisation.DirectCorrection`; and
 :func:`mbh._harness.neutral.conditioning.label_failure`.
 """
 
@@ -13,10 +13,11 @@ import pytest
 import scipy.linalg
 
 from mbh._adapters import get_adapter
-from mbh._adapters.inhouse.constraints import ConstraintSystem
-from mbh._adapters.inhouse.kinematics import common_start
-from mbh._adapters.inhouse.dynamics import Dynamics, range_space_acceleration, solve_augmented
-from mbh._adapters.inhouse.linalg import truncated_solve
+from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
+from mbh._adapters.inhouse.bodies.kinematics import common_start
+from mbh._adapters.inhouse.formulations.dynamics import range_space_acceleration, solve_augmented
+from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
+from mbh._adapters.inhouse.numerics.linalg import truncated_solve
 from mbh._harness.model import scenario
 from mbh._harness.run.case import run_case
 from mbh._harness.neutral.conditioning import conditioning

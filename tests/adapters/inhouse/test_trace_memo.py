@@ -1,4 +1,4 @@
-"""The remembered traces of the generated functions (adapters/inhouse/generated.py,
+"""The remembered traces of the generated functions (adapters/inhouse/codegen/generated.py,
 ``trace_key``; generated_store.py, ``remember``): a trace is made once per set of inputs, a later
 call with the same inputs loads the remembered entry (or raises the remembered reason) without
 tracing, a damaged entry is traced again, and the key changes with every input of the trace."""
@@ -13,7 +13,7 @@ import pytest
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunGrid
-from mbh._adapters.inhouse import generated, generated_store
+from mbh._adapters.inhouse.codegen import generated, generated_store
 from mbh._harness.model import scenario
 from mbh._harness.model.timegrid import sample_times
 

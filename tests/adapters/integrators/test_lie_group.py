@@ -16,10 +16,10 @@ from scipy.integrate import solve_ivp
 from scipy.spatial.transform import Rotation
 
 from mbh._adapters import get_adapter
-from mbh._adapters.inhouse.constraints import layout_of
-from mbh._adapters.inhouse.kinematics import assemble
-from mbh._adapters.inhouse.newton_euler import NewtonEuler
-from mbh._adapters.inhouse.states import body_states
+from mbh._adapters.inhouse.bodies.constraints import layout_of
+from mbh._adapters.inhouse.bodies.kinematics import assemble
+from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
+from mbh._adapters.inhouse.bodies.states import body_states
 from mbh._adapters.integrators import RUNNING, make_integrator, so3
 from mbh._adapters.pinocchio_adapter.adapter import solver_settings
 from mbh._adapters.pinocchio_adapter.dynamics import ConstrainedProblem
