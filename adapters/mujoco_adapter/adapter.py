@@ -6,6 +6,7 @@ and :mod:`.stepping`, the engine-specific stepper driven by the shared run loop
 from __future__ import annotations
 
 import time
+import xml.etree.ElementTree as ElementTree
 
 import mujoco
 import numpy as np
@@ -145,11 +146,40 @@ class _MujocoStepper(Stepper):
 
 
 def export_mjcf(mech: Mechanism) -> str:
-    """The MJCF text of the model :meth:`MujocoAdapter.build` makes for ``mech``.
+    """The MJCF text of the model :meth:`MujocoAdapter.build` makes for ``mech``, every body's
+    mass properties written at full precision (:func:`_with_exact_inertials`).
 
     Raises
     ------
     UnsupportedCase
         When MuJoCo cannot represent ``mech``.
     """
-    return MujocoAdapter().build(mech).spec.to_xml()
+    built = MujocoAdapter().build(mech)
+    return _with_exact_inertials(built.spec.to_xml(), built.model)
+
+
+def _exact(values) -> str:
+    """``values`` as MJCF text that reads back to the same doubles (shortest round trip)."""
+    return " ".join(repr(float(value)) for value in np.atleast_1d(values))
+
+
+def _with_exact_inertials(text: str, model: mujoco.MjModel) -> str:
+    """``text`` (MJCF) with each body's ``<inertial>`` rewritten from the compiled ``model``.
+
+    MuJoCo's writer keeps 6 significant digits: every mass property moved by up to 5e-7
+    relative, and a flat body (principal moments A + B = C, raised by ~1e-9 relative for MuJoCo's
+    A + B ≥ C check, :func:`~mbh._adapters.mujoco_adapter.build.balanced_inertia`) could read back
+    as A + B < C and be refused.
+    """
+    root = ElementTree.fromstring(text)
+    for body in root.iter("body"):
+        inertial = body.find("inertial")
+        if inertial is None:
+            continue
+        index = model.body(body.get("name")).id
+        inertial.set("pos", _exact(model.body_ipos[index]))
+        inertial.set("quat", _exact(model.body_iquat[index]))
+        inertial.set("mass", _exact(model.body_mass[index]))
+        inertial.set("diaginertia", _exact(model.body_inertia[index]))
+    ElementTree.indent(root, space="  ")
+    return ElementTree.tostring(root, encoding="unicode") + "\n"

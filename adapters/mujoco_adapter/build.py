@@ -34,13 +34,20 @@ from scipy.spatial.transform import Rotation
 
 from mbh._adapters.base import UNCLOSABLE, UnsupportedCase
 from mbh._adapters.mujoco_adapter.loads import _loads, _Loads
-from mbh._harness.model.mechanism import GROUND, Joint, Mechanism, SpringDamper
+from mbh._harness.model.mechanism import GROUND, Body, Joint, Mechanism, SpringDamper
 from mbh._harness.model.topology import SpanningTree, spanning_tree
 
 #: Smallest principal moment MuJoCo is given, relative to the body's largest, or for a point mass
 #: (no moment at all) to its moment m r² about its farthest joint point (MuJoCo refuses a
 #: non-positive moment; a slender bar has a zero moment about its own axis).
 INERTIA_FLOOR = 1e-9
+#: Margin of MuJoCo's check of the principal moments A ≤ B ≤ C, A + B ≥ C: a flat body (all its
+#: mass in one plane, e.g. a planar link built from parts) has C = A + B exactly, so round-off
+#: decides whether MuJoCo accepts it.  A body with A + B < (1 + FLAT_TOLERANCE) C is taken as flat
+#: and its two smaller moments are raised until A + B = (1 + TRIANGLE_MARGIN) C; any other body is
+#: left as it is (a slender bar's floored moment already gives A + B = (1 + INERTIA_FLOOR) C).
+FLAT_TOLERANCE = 1e-12
+TRIANGLE_MARGIN = 1e-9
 _SLIDING = ("prismatic", "translational")
 _Z = np.array([0.0, 0.0, 1.0])
 
@@ -162,26 +169,66 @@ def point_moment(mech: Mechanism, name: str) -> float:
     return mech.bodies[mech.body_index(name)].mass * max(arms, default=0.0)
 
 
-def _inertia_notes(mech: Mechanism) -> tuple[str, ...]:
-    """One note per body whose inertia :func:`floored_inertia` raised."""
+def balanced_inertia(inertia: np.ndarray) -> tuple[np.ndarray, float]:
+    """``inertia`` of a flat body (principal moments A ≤ B ≤ C with A + B < (1 +
+    :data:`FLAT_TOLERANCE`) C) with A and B each raised by half the shortfall to
+    A + B = (1 + :data:`TRIANGLE_MARGIN`) C, as MuJoCo requires A + B ≥ C: moments about the
+    in-plane axes, which a planar mechanism's joints never turn it about.  Any other body's
+    ``inertia`` is returned as it is.
+
+    Parameters
+    ----------
+    inertia : ndarray, shape (3, 3)
+        Centroidal inertia tensor, kg·m².
+
+    Returns
+    -------
+    inertia : ndarray, shape (3, 3)
+    raise : float
+        What A and B were each raised by, kg·m² (0.0 when unchanged).
+    """
+    moments, axes = np.linalg.eigh(inertia)
+    if moments[0] + moments[1] >= (1.0 + FLAT_TOLERANCE) * moments[2]:
+        return inertia, 0.0
+    shortfall = (1.0 + TRIANGLE_MARGIN) * moments[2] - moments[0] - moments[1]
+    raised = moments + np.array([0.5, 0.5, 0.0]) * shortfall
+    return axes @ np.diag(raised) @ axes.T, 0.5 * shortfall
+
+
+def mujoco_inertia(mech: Mechanism, body: Body) -> tuple[np.ndarray, tuple[str, ...]]:
+    """The centroidal inertia (kg·m², (3, 3)) MuJoCo is given for ``body``: floored
+    (:func:`floored_inertia`) then balanced (:func:`balanced_inertia`), and a note for each
+    change."""
+    original = np.asarray(body.inertia, dtype=float)
+    moments = np.linalg.eigvalsh(original)
+    floored, floor = floored_inertia(original, point_moment(mech, body.name))
     notes = []
-    for body in mech.bodies:
-        moments = np.linalg.eigvalsh(body.inertia)
-        raised, floor = floored_inertia(body.inertia, point_moment(mech, body.name))
-        if raised is not body.inertia:
-            scale = ("its largest" if moments[-1] > 0.0
-                     else "m r² about its farthest joint point: a point mass")
-            notes.append(f"body {body.name}: principal moment {moments[0]:.3g} raised to "
-                         f"{floor:.3g} kg·m² ({INERTIA_FLOOR:g} × {scale}) for MuJoCo, which "
-                         "requires positive inertia")
-    return tuple(notes)
+    if floored is not original:
+        scale = ("its largest" if moments[-1] > 0.0
+                 else "m r² about its farthest joint point: a point mass")
+        notes.append(f"body {body.name}: principal moment {moments[0]:.3g} raised to "
+                     f"{floor:.3g} kg·m² ({INERTIA_FLOOR:g} × {scale}) for MuJoCo, which "
+                     "requires positive inertia")
+    balanced, raised = balanced_inertia(floored)
+    if raised > 0.0:
+        allowed = ("a planar mechanism's joints never turn it about them" if mech.planar else
+                   f"a relative change of at most {TRIANGLE_MARGIN:g}")
+        notes.append(f"body {body.name}: flat (its principal moments A + B = C to round-off); "
+                     f"A and B raised by {raised:.3g} kg·m² for MuJoCo, which requires "
+                     f"A + B ≥ C ({allowed})")
+    return balanced, tuple(notes)
+
+
+def _inertia_notes(mech: Mechanism) -> tuple[str, ...]:
+    """The notes of :func:`mujoco_inertia` for every body."""
+    return tuple(note for body in mech.bodies for note in mujoco_inertia(mech, body)[1])
 
 
 def _add_body(spec_parent, mech: Mechanism, name: str, parent: str):
     """Add body ``name`` under ``spec_parent`` at its reference pose relative to ``parent``."""
     rot_p, pos_p = _pose(mech, parent)
     body = mech.bodies[mech.body_index(name)]
-    inertia, _ = floored_inertia(np.asarray(body.inertia, dtype=float), point_moment(mech, name))
+    inertia, _ = mujoco_inertia(mech, body)
     added = spec_parent.add_body(name=name, pos=rot_p.T @ (body.position - pos_p),
                                  quat=_quat(rot_p.T @ body.rotation))
     added.mass = body.mass

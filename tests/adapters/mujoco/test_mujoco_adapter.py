@@ -13,7 +13,7 @@ from scipy.spatial.transform import Rotation
 
 from mbh._adapters.base import UnsupportedCase
 from mbh._adapters.mujoco_adapter import MujocoAdapter, export_mjcf
-from mbh._adapters.mujoco_adapter.build import floored_inertia, point_moment
+from mbh._adapters.mujoco_adapter.build import mujoco_inertia
 from mbh._adapters.mujoco_adapter.methods import INTEGRATORS
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.model.mechanism import BodyTorque, JointActuation, SpringDamper
@@ -163,8 +163,9 @@ def test_exact_inertias(case):
         frame = Rotation.from_quat(model.body_iquat[index], scalar_first=True).as_matrix()
         tensor = frame @ np.diag(model.body_inertia[index]) @ frame.T
         # A slender body's zero moment is raised to INERTIA_FLOOR × its largest, a point mass's
-        # to INERTIA_FLOOR × m r² about its farthest joint point (noted).
-        expected, _ = floored_inertia(body.inertia, point_moment(mech, body.name))
+        # to INERTIA_FLOOR × m r² about its farthest joint point, a flat body's in-plane moments
+        # until A + B ≥ C (each noted).
+        expected, _ = mujoco_inertia(mech, body)
         np.testing.assert_allclose(tensor, expected, rtol=0, atol=1e-12 * expected.max())
         np.testing.assert_array_equal(model.body_ipos[index], 0.0)
 
