@@ -12,6 +12,8 @@ panel; the x axis carries each run's commit and the engine's version.
 
 from __future__ import annotations
 
+import textwrap
+
 import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullLocator
@@ -24,6 +26,9 @@ KIND_COLOURS = {"regression": "#D55E00", "improvement": "#009E73"}
 KIND_MARKERS = {"regression": "^", "improvement": "v"}
 #: Most x tick labels on one axis (every k-th run is labelled beyond that).
 MAX_LABELS = 16
+#: Most characters on a line of a legend entry (a longer one wraps): the legend sits beside the
+#: panels, and one long method string squeezed them to nothing.
+LEGEND_WIDTH = 40
 _BAND = "#BBBBBB"
 #: The quantities of the first panel and of the second.
 TIME_COLUMN = "calibrated_time"
@@ -45,6 +50,11 @@ def method_family(method: str) -> str:
 
 def _case_label(row) -> str:
     return f"{row['method']} dt={row['dt']:g}"
+
+
+def _legend_entry(text: str) -> str:
+    """``text`` as a legend entry: wrapped to :data:`LEGEND_WIDTH`, escaped for matplotlib."""
+    return plain("\n".join(textwrap.wrap(text, LEGEND_WIDTH, break_long_words=True)))
 
 
 def _relative(case: pd.DataFrame, column: str, runs: int) -> np.ndarray:
@@ -84,7 +94,8 @@ def _draw_quantities(axes, cases: pd.DataFrame, changes: pd.DataFrame, columns: 
                 continue
             name = QUANTITIES[column][0]
             axes.plot(x, values, markersize=2.5,
-                      label=plain(f"{_case_label(case.iloc[0])}: {name}"), **series_style(index))
+                      label=_legend_entry(f"{_case_label(case.iloc[0])}: {name}"),
+                      **series_style(index))
             index += 1
             mine = changes[(changes["case_id"] == case_id) & (changes["quantity"] == column)]
             for change in mine.itertuples():

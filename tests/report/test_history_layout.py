@@ -1,11 +1,13 @@
 """The history page's layout: a campaign with a single run says it has no history yet instead of
 drawing empty figures, and the changes table fits the page however long its cells (checked in
-headless Chromium at a laptop's and a phone's width where Chromium is installed)."""
+headless Chromium at a laptop's and a phone's width where Chromium is installed), as do the
+trend figures with a long method name."""
 
 from __future__ import annotations
 
 import json
 import re
+import warnings
 
 import numpy as np
 import pytest
@@ -74,6 +76,15 @@ def test_the_changes_table_has_five_columns_of_fixed_width(tmp_path):
     assert len(rows) == 2 * 3  # per case: main-output error, violation, energy
     assert LONG_METHOD in rows[0] and "3.1.0-long-build-tag → 3.2.0-long-build-tag" in rows[0]
     assert "#changes-table { width: 100%; table-layout: fixed; }" in html
+
+
+def test_a_long_method_name_leaves_the_trend_figures_their_room(tmp_path):
+    # its legend entry beside the panels squeezed them to nothing (matplotlib: "constrained_layout
+    # not applied because axes sizes collapsed to zero") before it wrapped
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        html = _page(tmp_path, _long_history())
+    assert html.count('<figure class="fig"') == 2
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="Debian's chromium is not installed")
