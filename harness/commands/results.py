@@ -89,7 +89,8 @@ def show(args) -> int:
 
 
 def compare(args) -> int:
-    """What changed from run A to run B, case by case (:func:`mbh._harness.store.compare.compare_runs`)."""
+    """What changed from run A to run B, case by case
+    (:func:`mbh._harness.store.compare.compare_runs`)."""
     from mbh._harness.store.compare import comparable_calibrations, compare_runs
 
     a, b = open_run(args.run_a, args.root), open_run(args.run_b, args.root)

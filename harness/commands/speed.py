@@ -47,8 +47,9 @@ def add_commands(sub) -> None:
 
 
 def warm_up(args) -> int:
-    """Compile the in-house kernels and loops ahead of the first runs (:mod:`mbh._harness.run.warm_up`)
-    and say what each case compiled and how long it took; a failed case is listed, not fatal."""
+    """Compile the in-house kernels and loops ahead of the first runs
+    (:mod:`mbh._harness.run.warm_up`) and say what each case compiled and how long it took; a
+    failed case is listed, not fatal."""
     from mbh._harness.run.executor import usable_cores
     from mbh._harness.run.warm_up import warm_up as compile_cases
 
