@@ -195,40 +195,58 @@ def balanced_inertia(inertia: np.ndarray) -> tuple[np.ndarray, float]:
     return axes @ np.diag(raised) @ axes.T, 0.5 * shortfall
 
 
-def mujoco_inertia(mech: Mechanism, body: Body) -> tuple[np.ndarray, tuple[str, ...]]:
-    """The centroidal inertia (kg·m², (3, 3)) MuJoCo is given for ``body``: floored
-    (:func:`floored_inertia`) then balanced (:func:`balanced_inertia`), and a note for each
-    change."""
+def mujoco_inertia(mech: Mechanism, body: Body) -> tuple[np.ndarray, str | None, float]:
+    """The centroidal inertia MuJoCo is given for ``body``: floored (:func:`floored_inertia`)
+    then balanced (:func:`balanced_inertia`).
+
+    Returns
+    -------
+    inertia : ndarray, shape (3, 3)
+        kg·m².
+    floor_note : str or None
+        What the floor changed, if it changed anything.
+    raised : float
+        What a flat body's in-plane moments were raised by, kg·m² (0.0 for any other body).
+    """
     original = np.asarray(body.inertia, dtype=float)
     moments = np.linalg.eigvalsh(original)
     floored, floor = floored_inertia(original, point_moment(mech, body.name))
-    notes = []
+    floor_note = None
     if floored is not original:
         scale = ("its largest" if moments[-1] > 0.0
                  else "m r² about its farthest joint point: a point mass")
-        notes.append(f"body {body.name}: principal moment {moments[0]:.3g} raised to "
-                     f"{floor:.3g} kg·m² ({INERTIA_FLOOR:g} × {scale}) for MuJoCo, which "
-                     "requires positive inertia")
+        floor_note = (f"body {body.name}: principal moment {moments[0]:.3g} raised to "
+                      f"{floor:.3g} kg·m² ({INERTIA_FLOOR:g} × {scale}) for MuJoCo, which "
+                      "requires positive inertia")
     balanced, raised = balanced_inertia(floored)
-    if raised > 0.0:
-        allowed = ("a planar mechanism's joints never turn it about them" if mech.planar else
-                   f"a relative change of at most {TRIANGLE_MARGIN:g}")
-        notes.append(f"body {body.name}: flat (its principal moments A + B = C to round-off); "
-                     f"A and B raised by {raised:.3g} kg·m² for MuJoCo, which requires "
-                     f"A + B ≥ C ({allowed})")
-    return balanced, tuple(notes)
+    return balanced, floor_note, raised
 
 
 def _inertia_notes(mech: Mechanism) -> tuple[str, ...]:
-    """The notes of :func:`mujoco_inertia` for every body."""
-    return tuple(note for body in mech.bodies for note in mujoco_inertia(mech, body)[1])
+    """One note per body whose moments were floored, and one for all flat bodies
+    (:func:`mujoco_inertia`)."""
+    notes, flat = [], {}
+    for body in mech.bodies:
+        _, floor_note, raised = mujoco_inertia(mech, body)
+        if floor_note:
+            notes.append(floor_note)
+        if raised > 0.0:
+            flat[body.name] = raised
+    if flat:
+        allowed = ("a planar mechanism's joints never turn them about those axes" if mech.planar
+                   else f"a relative change of at most {TRIANGLE_MARGIN:g}")
+        notes.append(f"flat {'body' if len(flat) == 1 else 'bodies'} {', '.join(flat)} (principal "
+                     f"moments A + B = C to round-off): A and B raised by at most "
+                     f"{max(flat.values()):.3g} kg·m² for MuJoCo, which requires A + B ≥ C "
+                     f"({allowed})")
+    return tuple(notes)
 
 
 def _add_body(spec_parent, mech: Mechanism, name: str, parent: str):
     """Add body ``name`` under ``spec_parent`` at its reference pose relative to ``parent``."""
     rot_p, pos_p = _pose(mech, parent)
     body = mech.bodies[mech.body_index(name)]
-    inertia, _ = mujoco_inertia(mech, body)
+    inertia, _, _ = mujoco_inertia(mech, body)
     added = spec_parent.add_body(name=name, pos=rot_p.T @ (body.position - pos_p),
                                  quat=_quat(rot_p.T @ body.rotation))
     added.mass = body.mass

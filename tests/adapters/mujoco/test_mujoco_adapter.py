@@ -165,7 +165,7 @@ def test_exact_inertias(case):
         # A slender body's zero moment is raised to INERTIA_FLOOR × its largest, a point mass's
         # to INERTIA_FLOOR × m r² about its farthest joint point, a flat body's in-plane moments
         # until A + B ≥ C (each noted).
-        expected, _ = mujoco_inertia(mech, body)
+        expected, _, _ = mujoco_inertia(mech, body)
         np.testing.assert_allclose(tensor, expected, rtol=0, atol=1e-12 * expected.max())
         np.testing.assert_array_equal(model.body_ipos[index], 0.0)
 
