@@ -11,7 +11,8 @@ resolved against the importing package) is checked:
 2. nothing outside ``adapters/inhouse/`` imports ``mbh._adapters.inhouse``;
 3. ``harness/`` reaches adapters only through the registry: ``adapters`` and ``mbh._adapters.base``;
 4. the contestants do not import the judge: of ``harness``, ``adapters/`` imports only
-   :data:`ADAPTERS_MAY_IMPORT` (the model, the body graph, trajectories and the common start);
+   :data:`ADAPTERS_MAY_IMPORT` (the model, the body graph, trajectories, statuses and the common
+   start);
 5. engine adapter packages (``adapters/*_adapter``) never import each other;
 6. no import cycle among the modules (function-level imports included).
 
@@ -54,7 +55,7 @@ _RANK = {name: rank for rank, (name, _, _) in enumerate(LAYERS)}
 HARNESS_MAY_IMPORT = {"mbh._adapters", "mbh._adapters.base"}
 ADAPTERS_MAY_IMPORT = {"mbh._harness.common", "mbh._harness.model.mechanism",
                        "mbh._harness.model.trajectory", "mbh._harness.model.topology",
-                       "mbh._harness.neutral.start"}
+                       "mbh._harness.model.status", "mbh._harness.neutral.start"}
 #: The import package each repository folder is mapped to (pyproject.toml's package-dir).
 MAPPED = {"harness": "mbh._harness", "adapters": "mbh._adapters", "mbh": "mbh"}
 
@@ -251,7 +252,9 @@ def test_the_checker_sees_every_kind_of_violation():
     assert violation("mbh._adapters.inhouse.adapter", "mbh._adapters.inhouse.stepping.driver") is None
     assert violation("mbh._harness.cli", "mbh._adapters.get_adapter") is None
     assert violation("mbh._harness.cli", "mbh._adapters.base.UnsupportedCase") is None
-    assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.integrators.RUNNING") is None
+    assert violation("mbh._adapters.pinocchio_adapter.adapter",
+                     "mbh._adapters.integrators.IntegratorState") is None
+    assert violation("mbh._adapters.base", "mbh._harness.model.status.CaseStatus") is None
     assert violation("mbh._adapters.mujoco_adapter.build", "mbh._harness.model.mechanism.Mechanism") is None
     assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.pinocchio_adapter.build") \
         is None

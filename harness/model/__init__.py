@@ -4,8 +4,9 @@ field by ``toml_fields``, section by section by ``scenario_reader``, ``scenario_
 ``scenario_joints``, ``scenario_forces``, ``scenario_initial`` and ``scenario_outputs``), with a
 body's mass properties summed from simple parts (``parts``) and the check that joints hold the
 turns of bodies with zero moments (``free_turns``); the body graph (``topology``); body-state
-trajectories (``trajectory``); the sample and reference time grids (``timegrid``); and the
-outputs of interest read from body states (``outputs``).
+trajectories (``trajectory``); the statuses of a case, a run and an integrator (``status``); the
+sample and reference time grids (``timegrid``); and the outputs of interest read from body
+states (``outputs``).
 
 May import: :mod:`mbh._harness.common`.
 """

@@ -10,17 +10,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: How a case ended, the same vocabulary for every adapter (the run loop of
-#: :mod:`mbh._adapters.base` classifies):
-#:
-#: * ``ok``: every state the run produced and the loop read was finite and within bounds;
-#: * ``diverged``: a non-finite or exploding state (position, orientation, velocity or angular
-#:   velocity), found by the common check or the engine's own;
-#: * ``failed``: the method stopped (a solver failure, or an exception raised during the run);
-#: * ``unsupported``: the engine cannot represent the mechanism or the method;
-#: * ``timeout``: the case ran out of its time budget (campaign runner);
-#: * ``crashed``: the worker process running the case died (campaign runner).
-STATUSES = ("ok", "diverged", "failed", "unsupported", "timeout", "crashed")
+from mbh._harness.model.status import CaseStatus
+
+#: Every case status, in the order reports list them (:class:`CaseStatus` says what each means).
+STATUSES = tuple(CaseStatus)
 
 
 @dataclass
@@ -55,8 +48,8 @@ class Trajectory:
         Sample times reached, s.  A failed run holds the samples before the failure.
     position, quaternion, velocity, angular_velocity : ndarray, shape (n_samples, n_bodies, k)
         As in :class:`BodyStates`, one slice per sample time.
-    status : str
-        One of :data:`STATUSES`.
+    status : CaseStatus
+        How the run ended (a plain string of :class:`CaseStatus` is read as its member).
     reason : str
         Why the run did not end ``ok`` (empty otherwise).
     failure_time : float or None
@@ -81,7 +74,7 @@ class Trajectory:
     quaternion: np.ndarray
     velocity: np.ndarray
     angular_velocity: np.ndarray
-    status: str = "ok"
+    status: CaseStatus = CaseStatus.OK
     reason: str = ""
     failure_time: float | None = None
     wall_time_s: float = 0.0
@@ -92,7 +85,8 @@ class Trajectory:
 
     def __post_init__(self):
         if self.status not in STATUSES:
-            raise ValueError(f"status must be one of {STATUSES}, got {self.status!r}")
+            raise ValueError(f"status must be one of {', '.join(STATUSES)}, got {self.status!r}")
+        self.status = CaseStatus(self.status)
 
     @property
     def n_samples(self) -> int:
