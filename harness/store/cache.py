@@ -12,6 +12,7 @@ import shutil
 import threading
 from pathlib import Path
 
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.store.files import write_table
 from mbh._harness.store.location import root_or_default
@@ -23,7 +24,7 @@ from mbh._harness.store.trajectory_files import load_trajectory, save_trajectory
 __all__ = ["UNCACHED_STATUSES", "CaseCache"]
 
 #: Statuses the cache never keeps: they describe the machine's load, not the case.
-UNCACHED_STATUSES = ("timeout", "crashed")
+UNCACHED_STATUSES = (CaseStatus.TIMEOUT, CaseStatus.CRASHED)
 
 
 class CaseCache:

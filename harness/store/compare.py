@@ -7,6 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from mbh._harness.model.status import CaseStatus
+
 #: Change classes of :func:`compare_runs`, in the order they are decided.
 CHANGES = ("newly failing", "newly passing", "less accurate", "more accurate", "slower",
            "faster", "unchanged")
@@ -81,8 +83,8 @@ def compare_runs(a: pd.DataFrame, b: pd.DataFrame, calibration_a: float | None,
     time_b = merged["wall_time_s_b"].to_numpy(float, na_value=np.nan) / calib_b
     error_ratio = _ratio(error_b, error_a)
     time_ratio = _ratio(time_b, time_a)
-    ok_a = (merged["status_a"] == "ok").to_numpy(bool)
-    ok_b = (merged["status_b"] == "ok").to_numpy(bool)
+    ok_a = (merged["status_a"] == CaseStatus.OK).to_numpy(bool)
+    ok_b = (merged["status_b"] == CaseStatus.OK).to_numpy(bool)
     both = ok_a & ok_b
     change = np.select(
         [ok_a & ~ok_b, ~ok_a & ok_b,

@@ -10,21 +10,15 @@ import json
 from pathlib import Path
 
 from mbh._harness.common.environment import git_state, machine, package_versions
+from mbh._harness.model.status import FINISHED_RUN_STATUSES, RunStatus
 from mbh._harness.store.location import root_or_default
 from mbh._harness.store.problems import StoreError, StoreProblem
 from mbh._harness.store.schema import SCHEMA_VERSION, SchemaError, migrate_manifest
 
-__all__ = ["MANIFEST", "RUN_STATUSES", "UNREADABLE", "timestamp", "new_manifest", "manifest_of",
-           "list_runs", "latest_run"]
+__all__ = ["MANIFEST", "timestamp", "new_manifest", "manifest_of", "list_runs", "latest_run"]
 
 #: The manifest's file name in a run folder.
 MANIFEST = "manifest.json"
-
-#: A run's ``status`` in its manifest.
-RUN_STATUSES = ("running", "complete", "interrupted")
-
-#: The status :func:`list_runs` gives a run whose manifest cannot be read.
-UNREADABLE = "unreadable"
 
 #: Keys every manifest has, each a string (what listing and opening a run read first).
 _MANIFEST_KEYS = ("run_id", "campaign", "started", "status")
@@ -46,7 +40,7 @@ def new_manifest(run_id: str, campaign, started: _dt.datetime,
         "run_id": run_id, "campaign": campaign.name, "campaign_path": str(campaign.path),
         "campaign_text": campaign.text, "n_cases": len(campaign.cases),
         "started": started.isoformat(timespec="microseconds"), "ended": None,
-        "status": "running", "git": git_state(), "packages": package_versions(),
+        "status": RunStatus.RUNNING, "git": git_state(), "packages": package_versions(),
         "machine": machine(), "scenario_hashes": scenario_hashes, "calibration_s": None,
     }
 
@@ -75,9 +69,9 @@ def _read_manifest(path: Path) -> dict:
 
 def _unreadable_manifest(folder: Path, problem: StoreProblem) -> dict:
     """What stands for a manifest that cannot be read: the folder's name as the run id, status
-    :data:`UNREADABLE`, the problem under ``problems``; parts are read at their own version."""
+    ``unreadable``, the problem under ``problems``; parts are read at their own version."""
     return {"run_id": folder.name, "campaign": "", "started": "", "ended": None,
-            "status": UNREADABLE, "n_cases": None, "schema_version": SCHEMA_VERSION,
+            "status": RunStatus.UNREADABLE, "n_cases": None, "schema_version": SCHEMA_VERSION,
             "created_schema_version": SCHEMA_VERSION, "calibration_s": None,
             "problems": [str(problem)]}
 
@@ -107,7 +101,7 @@ def _run_folders(root: Path) -> list[Path]:
 
 def list_runs(root: Path | None = None) -> list[dict]:
     """Manifests of every run under ``root`` (migrated), oldest start first; a run whose
-    manifest cannot be read comes first, as a stand-in with status :data:`UNREADABLE` and the
+    manifest cannot be read comes first, as a stand-in with status ``unreadable`` and the
     problem under ``problems``."""
     manifests = [manifest_of(path, (StoreError, SchemaError))[0]
                  for path in _run_folders(root_or_default(root))]
@@ -115,7 +109,7 @@ def list_runs(root: Path | None = None) -> list[dict]:
 
 
 def latest_run(campaign: str, root: Path | None = None, *, before: str | None = None,
-               statuses: tuple[str, ...] = RUN_STATUSES[1:]) -> str | None:
+               statuses: tuple[RunStatus, ...] = FINISHED_RUN_STATUSES) -> str | None:
     """The id of the latest stored run of campaign ``campaign`` whose status is one of
     ``statuses`` (default: finished, complete or interrupted), or None when there is none.
 

@@ -59,11 +59,12 @@ import pandas as pd
 
 from mbh._harness.common.machine_speed import workload_name
 from mbh._harness.model import scenario
+from mbh._harness.model.status import FINISHED_RUN_STATUSES, RunStatus
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.store.files import write_json, write_table
 from mbh._harness.store.location import check_writable, root_or_default
-from mbh._harness.store.manifest import (MANIFEST, RUN_STATUSES, UNREADABLE, list_runs,
-                                         manifest_of, new_manifest, timestamp)
+from mbh._harness.store.manifest import (MANIFEST, list_runs, manifest_of, new_manifest,
+                                         timestamp)
 from mbh._harness.store.problems import (DAMAGE, MissingTrajectory, StoreError, StoreProblem,
                                          StoreWarning, write_problem, writing)
 from mbh._harness.store.rows import PartTable
@@ -127,7 +128,7 @@ class RunStore:
         """
         if self._writer_lock is not None:
             return
-        if self.manifest["status"] == UNREADABLE:
+        if self.manifest["status"] == RunStatus.UNREADABLE:
             raise StoreError(f"{self.problems[0]}; the run cannot be written to (start a new run)")
         check_writable(self.path.parent)
         self._writer_lock = lock_run_folder(self.path)
@@ -185,7 +186,7 @@ class RunStore:
         """The existing run ``run_id`` under ``root``.
 
         A run whose manifest cannot be read opens for reading, with the stand-in manifest
-        :func:`list_runs` shows (status :data:`UNREADABLE`) and the problem in
+        :func:`list_runs` shows (status ``unreadable``) and the problem in
         :attr:`problems`; :meth:`lock` refuses it.
 
         Raises
@@ -248,7 +249,7 @@ class RunStore:
                 yield
         except StoreError as error:
             try:
-                self.manifest.update(status="interrupted", ended=timestamp())
+                self.manifest.update(status=RunStatus.INTERRUPTED, ended=timestamp())
                 self._write_manifest()
                 marked = "marked interrupted"
             except StoreError:
@@ -296,14 +297,16 @@ class RunStore:
 
     def mark_running(self) -> None:
         """Set the status back to ``running`` (a resumed run), clearing the end time."""
-        self.manifest.update(status="running", ended=None)
+        self.manifest.update(status=RunStatus.RUNNING, ended=None)
         self._write_manifest()
 
-    def finish(self, status: str) -> None:
-        """Record the end time and ``status`` ("complete" or "interrupted"); write the
-        one-file exports ``cases.parquet`` and ``sweeps.parquet``."""
-        if status not in RUN_STATUSES[1:]:
-            raise ValueError(f"run status must be one of {RUN_STATUSES[1:]}, got {status!r}")
+    def finish(self, status: RunStatus) -> None:
+        """Record the end time and ``status`` (one of
+        :data:`~mbh._harness.model.status.FINISHED_RUN_STATUSES`); write the one-file exports
+        ``cases.parquet`` and ``sweeps.parquet``."""
+        if status not in FINISHED_RUN_STATUSES:
+            raise ValueError(f"run status must be one of {', '.join(FINISHED_RUN_STATUSES)}, "
+                             f"got {status!r}")
         for part_table, name in ((self._cases, "cases.parquet"),
                                  (self._sweeps, "sweeps.parquet")):
             table = part_table.table()

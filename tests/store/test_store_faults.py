@@ -25,7 +25,7 @@ from mbh._harness import cli
 from mbh._harness.run.row import run_spec
 from mbh._harness.run.spec import CaseSpec, load_campaign
 from mbh._harness.run.sweep import bisections, stability_sweep
-from mbh._harness.store.manifest import UNREADABLE, list_runs
+from mbh._harness.store.manifest import list_runs
 from mbh._harness.store.problems import MissingTrajectory, StoreError, StoreWarning
 from mbh._harness.store.runs import RunStore, load_run
 from tests.store.store_cases import RUNNABLE_CAMPAIGN
@@ -156,7 +156,7 @@ def test_a_damaged_manifest_lists_as_unreadable_and_its_rows_still_read(run, sto
     MANIFEST_DAMAGE[damage](manifest)
 
     listed = {m["run_id"]: m["status"] for m in list_runs(root)}
-    assert listed == {run_id: UNREADABLE, other.run_id: "complete"}
+    assert listed == {run_id: "unreadable", other.run_id: "complete"}
     status, out, err = mbh("runs", "--root", root)
     assert status == 0 and other.run_id in out and f"{run_id}  " in out
     assert err.startswith(f"mbh: warning: {manifest}: "), err
