@@ -11,7 +11,7 @@ One run loop
 the times with one rule (:func:`check_run_times`), asks the adapter for an engine-specific
 :class:`Stepper` (``Adapter._start``), steps it through every sample time and on to ``t_end``,
 checks every state it reads (:func:`divergence_reason`) and turns every way a run can end into a
-status (the classification is in :mod:`mbh._harness.model.trajectory`):
+status (:class:`~mbh._harness.model.status.CaseStatus`):
 
 * ``ok``: every state read was finite and within :data:`DIVERGENCE_LIMIT`;
 * ``diverged``: a state read was non-finite or beyond the limit, or the engine's own divergence
@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 #: A body whose position (m), velocity (m/s) or angular velocity (rad/s) exceeds this in norm has
@@ -92,15 +93,17 @@ class RunFailure(Exception):
     Parameters
     ----------
     status : {"failed", "diverged"}
+        The run's :class:`~mbh._harness.model.status.CaseStatus` (a member or its string, such
+        as an in-house integrator's state once it stopped).
     reason : str
         What happened, for the trajectory's ``reason``.
     """
 
     def __init__(self, status: str, reason: str):
-        if status not in ("failed", "diverged"):
+        if status not in (CaseStatus.FAILED, CaseStatus.DIVERGED):
             raise ValueError(f"RunFailure status must be 'failed' or 'diverged', got {status!r}")
         super().__init__(reason)
-        self.status = status
+        self.status = CaseStatus(status)
         self.reason = reason
 
 
@@ -311,7 +314,7 @@ class Stepper(abc.ABC):
         becomes a status (see the module notes)."""
         times, states = [], []
         last_good, wall, read_back = 0.0, 0.0, 0.0
-        status, reason, failure_time = "ok", "", None
+        status, reason, failure_time = CaseStatus.OK, "", None
         targets = np.asarray(grid.sample_times, dtype=float).tolist()  # floats, not numpy scalars
         if not targets or targets[-1] < grid.t_end * (1 - GRID_RTOL):
             targets.append(float(grid.t_end))
@@ -336,14 +339,15 @@ class Stepper(abc.ABC):
                     times.append(t)
                     states.append(current)
         except _CheckFailed as error:
-            status, reason, failure_time = "diverged", str(error), last_good
+            status, reason, failure_time = CaseStatus.DIVERGED, str(error), last_good
         except RunFailure as error:
             status, reason, failure_time = error.status, error.reason, self._last_good(last_good)
         except _ContractBroken as error:
-            status, reason, failure_time = ("failed", blame(self.source, "the run", str(error)),
-                                            last_good)
+            status, reason, failure_time = (CaseStatus.FAILED,
+                                            blame(self.source, "the run", str(error)), last_good)
         except Exception as error:  # noqa: BLE001 — a failure is a result (design rule 6)
-            status, reason, failure_time = ("failed", blame(self.source, "the run", error),
+            status, reason, failure_time = (CaseStatus.FAILED,
+                                            blame(self.source, "the run", error),
                                             self._last_good(last_good))
         wall -= self.untimed_s
         run = dict(status=status, reason=reason, failure_time=failure_time, wall_time_s=wall,
@@ -530,9 +534,9 @@ class Adapter(abc.ABC):
         try:
             stepper = self._start(model, spec, params, grid)
         except UnsupportedCase as error:
-            return Trajectory.empty(n_bodies, status="unsupported", reason=str(error))
+            return Trajectory.empty(n_bodies, status=CaseStatus.UNSUPPORTED, reason=str(error))
         except Exception as error:  # noqa: BLE001 — a refused start is a result (rule 6)
-            return Trajectory.empty(n_bodies, status="failed",
+            return Trajectory.empty(n_bodies, status=CaseStatus.FAILED,
                                     reason=blame(self.source, "_start", error), failure_time=0.0)
         stepper.source = self.source
         try:

@@ -26,6 +26,7 @@ from mbh._adapters.exudyn_adapter.methods import (
 )
 from mbh._adapters.exudyn_adapter.system import ExudynSystem
 from mbh._harness.model.mechanism import PLANAR_JOINT_TYPES, Mechanism
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 
@@ -125,7 +126,7 @@ class ExudynAdapter(Adapter):
             began = time.perf_counter()
             outcome = system.run(solver, settings, dt)
             seconds = time.perf_counter() - began
-        if outcome.status != "ok":
+        if outcome.status != CaseStatus.OK:
             raise RunFailure(outcome.status, outcome.reason)
         return seconds
 
@@ -165,7 +166,7 @@ class _ExudynStepper(Stepper):
                 self._outcome = self.system.run(self.solver, self.settings, self.grid.dt)
             self.steps = self._outcome.steps
             self.t_good = self._outcome.t_good
-        if self._outcome.status != "ok" and self.grid.steps(t) > self._outcome.steps:
+        if self._outcome.status != CaseStatus.OK and self.grid.steps(t) > self._outcome.steps:
             raise RunFailure(self._outcome.status, self._outcome.reason)
 
     def _states(self, t: float) -> BodyStates:
@@ -173,7 +174,7 @@ class _ExudynStepper(Stepper):
             self._sensed = self.system.sensed(self.grid.dt)
         states = self._sensed.get(self.grid.steps(t))
         if states is None:
-            raise RunFailure("failed", f"exudyn stored no sensor sample for t = {t:g} s")
+            raise RunFailure(CaseStatus.FAILED, f"exudyn stored no sensor sample for t = {t:g} s")
         return states
 
     def counters(self) -> dict:

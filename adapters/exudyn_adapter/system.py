@@ -43,6 +43,7 @@ from mbh._harness.model.mechanism import (
     Mechanism,
     SpringDamper,
 )
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 _SENSED = ("Position", "RotationMatrix", "Velocity", "AngularVelocity")
@@ -105,7 +106,7 @@ class _Run:
         Time of the last completed step of a failed run, s (None when it ran to the end).
     """
 
-    status: str
+    status: CaseStatus
     reason: str
     t_good: float | None
     counters: dict
@@ -280,10 +281,10 @@ class ExudynSystem:
         except Exception as error:  # noqa: BLE001 — Newton failures are results (rule 6)
             success, reason = False, _describe(error)
         if success:
-            return _Run("ok", "", None, _counters(solver),
+            return _Run(CaseStatus.OK, "", None, _counters(solver),
                         int(settings.timeIntegration.numberOfSteps))
         steps = max(round(float(solver.it.currentTime) / dt) - 1, 0)
-        return _Run("failed", reason, steps * dt, _counters(solver), steps)
+        return _Run(CaseStatus.FAILED, reason, steps * dt, _counters(solver), steps)
 
     def sensed(self, dt: float) -> dict[int, BodyStates]:
         """Body states of every stored sensor row, keyed by step index round(t / dt)."""

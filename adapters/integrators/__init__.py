@@ -3,7 +3,7 @@
 Methods are looked up by their literature name::
 
     integrator = make_integrator("rk4", problem, t0, q0, v0, dt)
-    while integrator.t < t_end and integrator.step() == "running":
+    while integrator.t < t_end and integrator.step() == IntegratorState.RUNNING:
         ...
 
 ========================  =====  =========================================================
@@ -27,14 +27,7 @@ lsoda
 
 from __future__ import annotations
 
-from mbh._adapters.integrators.base import (
-    DIVERGED,
-    FAILED,
-    RUNNING,
-    Integrator,
-    SecondOrderProblem,
-    SecondOrderSystem,
-)
+from mbh._adapters.integrators.base import Integrator, SecondOrderProblem, SecondOrderSystem
 from mbh._adapters.integrators.multistep import (
     ABM4,
     ADAMS_BASHFORTH_METHODS,
@@ -43,9 +36,10 @@ from mbh._adapters.integrators.multistep import (
 )
 from mbh._adapters.integrators.nystrom import RK4, RK5, RK8, RKN4, Euler, Heun, SymplecticEuler
 from mbh._adapters.integrators.scipy_solvers import SCIPY_METHODS
+from mbh._harness.model.status import IntegratorState
 
 __all__ = [
-    "DIVERGED", "FAILED", "RUNNING", "INTEGRATORS", "Integrator", "SecondOrderProblem",
+    "INTEGRATORS", "Integrator", "IntegratorState", "SecondOrderProblem",
     "SecondOrderSystem", "integrator_class", "integrator_names", "integrator_params",
     "is_adaptive", "make_integrator",
 ]

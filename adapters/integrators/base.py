@@ -32,9 +32,9 @@ methods keep their order there (:mod:`.nystrom`, "Lie groups"):
 Failures
 --------
 ``step()`` never raises for a numerical failure: a non-finite state or one whose norm exceeds
-``divergence_limit`` sets ``status = "diverged"``; a ``FloatingPointError``, ``LinAlgError`` or
-``ValueError`` raised by the problem, or a method's own failure (:class:`StepFailure`, e.g. Newton
-not converging), sets ``status = "failed"``.  Either way ``failure_time`` is the time the failed
+``divergence_limit`` sets ``status = IntegratorState.DIVERGED``; a ``FloatingPointError``,
+``LinAlgError`` or ``ValueError`` raised by the problem, or a method's own failure
+(:class:`StepFailure`, e.g. Newton not converging), sets ``status = IntegratorState.FAILED``.  Either way ``failure_time`` is the time the failed
 step was heading for, ``failure_reason`` says why, and ``t, q, v`` keep the last good state.
 """
 
@@ -44,9 +44,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-RUNNING = "running"
-DIVERGED = "diverged"
-FAILED = "failed"
+from mbh._harness.model.status import IntegratorState
 
 
 @runtime_checkable
@@ -123,8 +121,8 @@ class Integrator:
     q : ndarray, shape (m,)
     v : ndarray, shape (n,)
     dt : float
-    status : str
-        ``"running"``, ``"diverged"`` or ``"failed"``.
+    status : IntegratorState
+        ``running`` while it steps, ``diverged`` or ``failed`` once it stopped.
     failure_reason : str or None
     failure_time : float or None
     nfev, njev, nlu, n_newton, n_steps : int
@@ -157,7 +155,7 @@ class Integrator:
         if self.dt <= 0:
             raise ValueError(f"dt must be > 0, got {dt!r}")
         self.params = self.resolve_params(params)
-        self.status = RUNNING
+        self.status = IntegratorState.RUNNING
         self.failure_reason: str | None = None
         self.failure_time: float | None = None
         self.nfev = self.njev = self.nlu = self.n_newton = self.n_steps = 0
@@ -187,15 +185,15 @@ class Integrator:
                                  f"{type(defaults[key]).__name__}, got {value!r}") from None
         return resolved
 
-    def step(self) -> str:
+    def step(self) -> IntegratorState:
         """Advance one step (by exactly ``dt`` for fixed-step methods), then project.
 
         Returns
         -------
-        status : str
-            The status after the step; a no-op returning it when not ``"running"``.
+        status : IntegratorState
+            The status after the step; a no-op returning it when not ``running``.
         """
-        if self.status != RUNNING:
+        if self.status != IntegratorState.RUNNING:
             return self.status
         new = self._checked(self._target_time(), self._step_impl)
         if new is not None:
@@ -213,17 +211,17 @@ class Integrator:
             q_new = np.asarray(q_new, dtype=float)
             v_new = np.asarray(v_new, dtype=float)
         except PROBLEM_ERRORS as exc:
-            self._fail(FAILED, t_target, f"{type(exc).__name__}: {exc}")
+            self._fail(IntegratorState.FAILED, t_target, f"{type(exc).__name__}: {exc}")
             return None
         limit = self.params["divergence_limit"]
         # One dot product per vector (ndarray.dot: a third of the cost of @ on short vectors);
         # NaN and inf propagate into their sum (not into max()).
         squared_q, squared_v = float(q_new.dot(q_new)), float(v_new.dot(v_new))
         if not np.isfinite(squared_q + squared_v):
-            self._fail(DIVERGED, t_new, "non-finite state")
+            self._fail(IntegratorState.DIVERGED, t_new, "non-finite state")
             return None
         if max(squared_q, squared_v) > limit * limit:
-            self._fail(DIVERGED, t_new, f"state norm exceeds divergence_limit={limit:g}")
+            self._fail(IntegratorState.DIVERGED, t_new, f"state norm exceeds divergence_limit={limit:g}")
             return None
         return t_new, q_new, v_new
 
@@ -231,7 +229,7 @@ class Integrator:
         """End time of the next fixed step, t0 + (n_steps + 1)·dt (no accumulated drift)."""
         return self.t0 + (self.n_steps + 1) * self.dt
 
-    def _fail(self, status: str, time: float, reason: str) -> None:
+    def _fail(self, status: IntegratorState, time: float, reason: str) -> None:
         self.status = status
         self.failure_time = float(time)
         self.failure_reason = reason

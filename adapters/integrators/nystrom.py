@@ -50,7 +50,8 @@ from functools import partial
 import numpy as np
 from scipy.integrate import DOP853, RK45
 
-from mbh._adapters.integrators.base import RUNNING, Integrator
+from mbh._adapters.integrators.base import Integrator
+from mbh._harness.model.status import IntegratorState
 
 
 @dataclass(frozen=True)
@@ -234,7 +235,7 @@ class NystromIntegrator(Integrator):
         q_new, v_new = self._rule(self.t, self.q, self.v, t_new - self.t, self.tableau)
         return t_new, q_new, v_new
 
-    def step_through(self, ends, steps: int) -> str:
+    def step_through(self, ends, steps: int) -> IntegratorState:
         """Steps of this method ending at the times ``ends`` (s, increasing, the last on the grid
         ``steps`` grid steps on), each projected and checked as :meth:`step` does; together they
         count as ``steps`` steps (a placed passage, :mod:`mbh._adapters.inhouse.formulations.fold`).  A failure
@@ -242,9 +243,9 @@ class NystromIntegrator(Integrator):
 
         Returns
         -------
-        status : str
+        status : IntegratorState
         """
-        if self.status != RUNNING:
+        if self.status != IntegratorState.RUNNING:
             return self.status
         t, q, v = self.t, self.q, self.v
         for t_new in ends:
@@ -257,7 +258,7 @@ class NystromIntegrator(Integrator):
         self.n_steps += steps
         return self.status
 
-    def steps_unchecked(self, count: int, rule) -> str:
+    def steps_unchecked(self, count: int, rule) -> IntegratorState:
         """``count`` steps by ``rule``, a step rule of this method (:func:`step_rule`) over a
         right-hand side without the problem's own per-call checks, projected as :meth:`step`
         projects them and checked once, on the last state.
@@ -275,10 +276,10 @@ class NystromIntegrator(Integrator):
 
         Returns
         -------
-        status : str
+        status : IntegratorState
             The status after the last step.
         """
-        if self.status != RUNNING or count <= 0:
+        if self.status != IntegratorState.RUNNING or count <= 0:
             return self.status
         limit = self.params["divergence_limit"] ** 2
         project, tableau, t0, dt = self.problem.project, self.tableau, self.t0, self.dt
@@ -295,7 +296,7 @@ class NystromIntegrator(Integrator):
             good = False
         if not good:  # NaN fails the comparisons too
             for _ in range(count):
-                if self.step() != RUNNING:
+                if self.step() != IntegratorState.RUNNING:
                     break
             return self.status
         self.t, self.q, self.v = t, q, v

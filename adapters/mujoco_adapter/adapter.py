@@ -19,6 +19,7 @@ from mbh._adapters.mujoco_adapter.state import _start as _set_start
 from mbh._adapters.mujoco_adapter.stepping import Stepping
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 
@@ -133,8 +134,8 @@ class _MujocoStepper(Stepper):
                                "not reproduce")
         self.steps += bad
         self.t_good = (self.steps - 1) * self.grid.dt
-        raise RunFailure("diverged", "MuJoCo raised a bad qpos/qvel/qacc warning (it would "
-                                     "reset and carry on)")
+        raise RunFailure(CaseStatus.DIVERGED, "MuJoCo raised a bad qpos/qvel/qacc warning (it "
+                                               "would reset and carry on)")
 
     def _states(self, t: float) -> BodyStates:
         states = _body_states(self.built, self.model, self.data, self._previous)

@@ -15,7 +15,7 @@ import time
 import pinocchio as pin
 
 from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper, UnsupportedCase
-from mbh._adapters.integrators import RUNNING, integrator_names, make_integrator
+from mbh._adapters.integrators import IntegratorState, integrator_names, make_integrator
 from mbh._adapters.integrators.nystrom import NystromIntegrator, step_rule
 from mbh._adapters.pinocchio_adapter.build import PinocchioModel, build_model
 from mbh._adapters.pinocchio_adapter.dynamics import SolverSettings
@@ -168,13 +168,13 @@ class _PinocchioStepper(Stepper):
                                                     self._unchecked_rule)
             finally:  # an engine error raised through keeps the last good step
                 self.steps, self.t_good = integrator.n_steps, integrator.t
-            if status != RUNNING:
+            if status != IntegratorState.RUNNING:
                 raise RunFailure(status, integrator.failure_reason or status)
             return
         while integrator.n_steps < target:
             status = integrator.step()
             self.steps, self.t_good = integrator.n_steps, integrator.t
-            if status != RUNNING:
+            if status != IntegratorState.RUNNING:
                 raise RunFailure(status, integrator.failure_reason or status)
 
     def _states(self, t: float) -> BodyStates:

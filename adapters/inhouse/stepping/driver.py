@@ -23,7 +23,7 @@ from mbh._adapters.inhouse.formulations.fold import Passages
 from mbh._adapters.inhouse.bodies.kinematics import common_start
 from mbh._adapters.inhouse.formulations.stabilisation import Formulation
 from mbh._adapters.inhouse.bodies.states import body_states
-from mbh._adapters.integrators import RUNNING, make_integrator
+from mbh._adapters.integrators import IntegratorState, make_integrator
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
 
@@ -129,10 +129,10 @@ class InhouseStepper(FormulationStepper):
             status = integrator.step()
         else:
             status = integrator.step_through(*passage)
-            self.passages.count[0] += status == RUNNING
+            self.passages.count[0] += status == IntegratorState.RUNNING
         self.steps = self._banked_steps + integrator.n_steps
         self.t_good = integrator.t
-        if status != RUNNING:
+        if status != IntegratorState.RUNNING:
             raise RunFailure(status, integrator.failure_reason or status)
         self._repartition_due = True
 

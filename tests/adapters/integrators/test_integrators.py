@@ -9,9 +9,7 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from mbh._adapters.integrators import (
-    DIVERGED,
-    FAILED,
-    RUNNING,
+    IntegratorState,
     SecondOrderSystem,
     integrator_names,
     integrator_params,
@@ -98,7 +96,7 @@ def run_steps(integrator, count):
 def final_error(name, problem, steps, params):
     integrator = run_steps(make_integrator(name, problem, 0.0, Q0, V0, T_END / steps, **params),
                            steps)
-    assert integrator.status == RUNNING, integrator.failure_reason
+    assert integrator.status == IntegratorState.RUNNING, integrator.failure_reason
     return np.max(np.abs(np.concatenate([integrator.q, integrator.v]) - problem.exact(T_END)))
 
 
@@ -157,13 +155,13 @@ class StiffOscillator(SecondOrderSystem):
 def test_euler_diverges_on_a_stiff_problem_with_its_time():
     # |1 + i h ω| = 10.05 per step with h = 0.1, ω = 100: the norm passes 1e8 in the 7th step.
     integrator = run_steps(make_integrator("euler", StiffOscillator(), 0.0, [1.0], [0.0], 0.1), 20)
-    assert integrator.status == DIVERGED
+    assert integrator.status == IntegratorState.DIVERGED
     assert integrator.failure_time == pytest.approx(0.7)
     assert integrator.t == pytest.approx(0.6)
     assert integrator.n_steps == 6
     assert np.linalg.norm(integrator.v) <= 1e8
     nfev = integrator.nfev
-    assert integrator.step() == DIVERGED
+    assert integrator.step() == IntegratorState.DIVERGED
     assert integrator.nfev == nfev
 
 
@@ -176,7 +174,7 @@ class NaNAfter(SecondOrderSystem):
 
 def test_a_non_finite_state_is_diverged():
     integrator = run_steps(make_integrator("rk4", NaNAfter(), 0.0, Q0, V0, 0.1), 10)
-    assert integrator.status == DIVERGED
+    assert integrator.status == IntegratorState.DIVERGED
     assert integrator.failure_reason == "non-finite state"
     assert integrator.failure_time == pytest.approx(0.3)
 
@@ -193,14 +191,14 @@ class RaisesAfter(SecondOrderSystem):
 @pytest.mark.parametrize("name", ["euler", "rkn4", "ab3", "abm4", "am3", "bdf2", "rk45", "radau"])
 def test_an_exception_from_the_problem_is_a_failure_with_its_reason(name):
     integrator = run_steps(make_integrator(name, RaisesAfter(), 0.0, Q0, V0, 0.1), 100)
-    assert integrator.status == FAILED
+    assert integrator.status == IntegratorState.FAILED
     assert "singular mass matrix" in integrator.failure_reason
     # The failing step evaluates at t ≥ its start, and no step exceeds 0.22 s here (rk45's
     # largest measured; the others take 0.1): the run stops within one step of t = 0.35.
     assert integrator.t < integrator.failure_time
     assert 0.35 < integrator.failure_time < integrator.t + 0.25
     assert integrator.t < 0.35 + 0.1
-    assert integrator.step() == FAILED
+    assert integrator.step() == IntegratorState.FAILED
 
 
 class SquareRootEnd(SecondOrderSystem):
@@ -218,7 +216,7 @@ def test_a_collapsing_adaptive_step_stops_the_run_at_once(name):
     integrator = make_integrator(name, SquareRootEnd(), 0.0, [1.0], [-0.5], 1e-3, rtol=1e-10,
                                  atol=1e-12)
     run_steps(integrator, 5000)
-    assert integrator.status == FAILED
+    assert integrator.status == IntegratorState.FAILED
     assert "step-size collapse" in integrator.failure_reason
     # The steps shrink with the distance to t = 1 and fall below 1e-5 · dt = 1e-8 s just before
     # it; the run stops there instead of crawling on.
@@ -245,7 +243,7 @@ def test_newton_that_cannot_converge_is_a_failure():
     # One iteration cannot reach tol = 1e-12 on the pendulum (first correction ~1e-3).
     integrator = run_steps(make_integrator("bdf2", DampedPendulum(), 0.0, Q0, V0, 0.1,
                                            max_iter=1, tol=1e-12), 5)
-    assert integrator.status == FAILED
+    assert integrator.status == IntegratorState.FAILED
     assert "Newton" in integrator.failure_reason
     assert integrator.failure_time == pytest.approx(0.2)  # step 1 is the RK4 start
 
@@ -280,7 +278,7 @@ class VanDerPol(SecondOrderSystem):
 def test_jacobian_is_refreshed_when_newton_slows_down(name):
     # Van der Pol, μ = 10, h = 0.01, 2000 steps: measured njev 4 (bdf1), 7 (am2).
     integrator = run_steps(make_integrator(name, VanDerPol(), 0.0, [2.0], [0.0], 0.01), 2000)
-    assert integrator.status == RUNNING
+    assert integrator.status == IntegratorState.RUNNING
     assert 1 < integrator.njev <= 20
     assert integrator.nlu == integrator.njev
 
@@ -306,9 +304,9 @@ ADAPTIVE_ERROR_FACTOR = [("rk45", 10), ("dop853", 5), ("radau", 1), ("bdf", 300)
 def adaptive_error(name, rtol):
     integrator = make_integrator(name, TwoFrequencies(), 0.0, [1.0, 0.0], [0.0, 2.0], 1e-3,
                                  rtol=rtol, atol=1e-3 * rtol)
-    while integrator.t < 5.0 and integrator.step() == RUNNING:
+    while integrator.t < 5.0 and integrator.step() == IntegratorState.RUNNING:
         pass
-    assert integrator.status == RUNNING, integrator.failure_reason
+    assert integrator.status == IntegratorState.RUNNING, integrator.failure_reason
     return np.max(np.abs(np.concatenate(integrator.dense(5.0)) - TwoFrequencies.exact(5.0)))
 
 
@@ -342,7 +340,7 @@ class UnitCircleOrbit(SecondOrderSystem):
 def test_projection_runs_after_every_step(name):
     problem = UnitCircleOrbit()
     integrator = make_integrator(name, problem, 0.0, [1.0, 0.0], [0.0, 1.0], 0.01)
-    while integrator.t < 1.0 and integrator.step() == RUNNING:
+    while integrator.t < 1.0 and integrator.step() == IntegratorState.RUNNING:
         pass
     assert problem.projections == integrator.n_steps
     assert np.linalg.norm(integrator.q) == pytest.approx(1.0, abs=1e-14)

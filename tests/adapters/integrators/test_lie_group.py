@@ -20,7 +20,7 @@ from mbh._adapters.inhouse.bodies.constraints import layout_of
 from mbh._adapters.inhouse.bodies.kinematics import assemble
 from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
 from mbh._adapters.inhouse.bodies.states import body_states
-from mbh._adapters.integrators import RUNNING, make_integrator, so3
+from mbh._adapters.integrators import IntegratorState, make_integrator, so3
 from mbh._adapters.pinocchio_adapter.adapter import solver_settings
 from mbh._adapters.pinocchio_adapter.dynamics import ConstrainedProblem
 from mbh._adapters.pinocchio_adapter.stepping import LieGroupProblem, constrained_problem
@@ -46,7 +46,7 @@ def integrate(name, problem, q0, v0, dt, count):
     integrator = make_integrator(name, problem, 0.0, q0, v0, dt)
     for _ in range(count):
         integrator.step()
-    assert integrator.status == RUNNING, integrator.failure_reason
+    assert integrator.status == IntegratorState.RUNNING, integrator.failure_reason
     return integrator.q, integrator.v
 
 
