@@ -59,6 +59,7 @@ from mbh._harness.measure.energy import energy_balance, energy_scale, has_quadra
 from mbh._harness.measure.metrics import reference_outputs, violation_series
 from mbh._harness.model.mechanism import Mechanism, characteristic_length
 from mbh._harness.model.outputs import rotation_between
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.timegrid import TIME_MATCH, reference_indices
 from mbh._harness.model.trajectory import Trajectory
 
@@ -317,10 +318,11 @@ def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None 
     found = "; ".join(check.describe(k) for check, row in zip(checks, ratios) if row[k] > 1.0)
     time = float(trajectory.times[k])
     reason = f"at t = {time:.6g} s: {found}"
-    if trajectory.status != "ok":
+    if trajectory.status != CaseStatus.OK:
         return dataclasses.replace(trajectory, notes=[*notes, f"the measuring stick: {reason}"])
     diverged = bool(np.max(ratios[:, k]) >= DIVERGED_FACTOR)
-    return dataclasses.replace(trajectory, status="diverged" if diverged else "failed",
+    return dataclasses.replace(trajectory,
+                               status=CaseStatus.DIVERGED if diverged else CaseStatus.FAILED,
                                reason=reason, failure_time=float(trajectory.times[max(k - 1, 0)]),
                                notes=notes)
 

@@ -26,6 +26,7 @@ from mbh._harness.neutral.assembly import assemble
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.neutral.mobility import independent_rows
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 
 #: Fraction of its median at or below which a local minimum of σ_r/σ_1 counts as a near-singular
@@ -38,7 +39,7 @@ SINGULAR_DROP = 1e-2
 #: or after the passage (IDA on double_fourbar: 0.7096 s, passage at 0.714 s) is placed there.
 SINGULAR_WINDOW_S = 0.05
 #: Statuses of a run that started and stopped (its failure time is known).
-STOPPED = ("failed", "diverged", "crashed", "timeout")
+STOPPED = (CaseStatus.FAILED, CaseStatus.DIVERGED, CaseStatus.CRASHED, CaseStatus.TIMEOUT)
 
 
 @dataclass(frozen=True)
@@ -131,7 +132,7 @@ def label_failure(mech: Mechanism, trajectory: Trajectory,
         The verified reference (without one, only the redundancy is checked, at the assembled
         start).
     """
-    if trajectory.status == "ok":
+    if trajectory.status == CaseStatus.OK:
         return trajectory
     reason = trajectory.reason or trajectory.status
     if (reference is not None and reference.n_samples and trajectory.status in STOPPED

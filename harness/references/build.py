@@ -57,6 +57,7 @@ from mbh._harness.references.routes import (ROUTE_TOLERANCE, BranchRouteError, f
                                             reduced_route)
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.outputs import output_series
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.timegrid import GRID_STEP
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.common.errors import MbhError
@@ -127,7 +128,7 @@ def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray,
             raise ReferenceBuildError(f"{mech.name}: reference route {method}: {error}") from error
     t_end = mech.duration if t_end is None else t_end
     trajectory = get_adapter("inhouse").simulate(mech, method, step, t_end, grid)
-    if trajectory.status != "ok" or trajectory.n_samples != grid.size:
+    if trajectory.status != CaseStatus.OK or trajectory.n_samples != grid.size:
         raise ReferenceBuildError(f"{mech.name}: reference route {method} (dt {step:g}) ended "
                              f"{trajectory.status} at t = {trajectory.failure_time}: "
                              f"{trajectory.reason}")
