@@ -15,16 +15,17 @@ from mbh._harness.model import scenario
 def add_commands(sub) -> None:
     """Add ``simulate`` and ``seed-table`` to the subparsers ``sub``."""
     p = sub.add_parser("simulate", help="run one case and measure it against the reference; "
-                       "exit 1 when it is not ok or not accurate")
+                       "exit 1 when it is not ok (or, given --accuracy, not accurate)")
     p.add_argument("name")
     p.add_argument("--adapter", default="inhouse")
     p.add_argument("--method", default="default")
     p.add_argument("--dt", type=float, required=True, help="step size, s")
     p.add_argument("--t-end", type=float, default=None, help="end time, s (default: duration)")
     p.add_argument("--no-reference", action="store_true", help="skip the reference comparison")
-    p.add_argument("--accuracy", type=positive_number, default=DEFAULT_ACCURACY,
+    p.add_argument("--accuracy", type=positive_number, default=None,
                    help="largest main-output error against the reference (rad or m) of an "
-                        "accurate case (default %(default)g, as a campaign's)")
+                        f"accurate case; given, a case that is not accurate exits 1 (default "
+                        f"{DEFAULT_ACCURACY:g}, a campaign's, for the printed 'accurate' only)")
     shared(p, "bounds", "quiet", "json")
     p.set_defaults(func=simulate)
 
@@ -52,8 +53,10 @@ def simulate(args) -> int:
     Python API's rules (:func:`mbh._harness.run.single.check_case`: every problem named, exit 2);
     print its metrics and whether it is ``accurate`` (None without a reference).
 
-    Exit status 0 when the case is ``ok`` and, measured against a reference, accurate within
-    ``--accuracy``; 1 otherwise.
+    Exit status 0 when the case is ``ok`` and, when ``--accuracy`` is given and a reference
+    measured it, accurate within it; 1 otherwise.  Without ``--accuracy`` the printed
+    ``accurate`` uses a campaign's default and the status alone decides the exit status: a
+    first ``mbh simulate`` whose case is ``ok`` exits 0, however coarse its step.
     """
     from mbh._adapters import get_adapter
     from mbh._harness.run.case import run_case
@@ -66,8 +69,8 @@ def simulate(args) -> int:
     reference = None if args.no_reference else _reference(mech)
     case = run_case(adapter, mech, args.method, args.dt, t_end, reference, args.bounds)
     error = case.metrics.get("output_errors", {}).get(main_output(mech), float("nan"))
-    accurate = None if reference is None else bool(case.status == "ok"
-                                                   and error <= args.accuracy)
+    accuracy = DEFAULT_ACCURACY if args.accuracy is None else args.accuracy
+    accurate = None if reference is None else bool(case.status == "ok" and error <= accuracy)
     result = {"scenario": mech.name, "adapter": adapter.name, "version": adapter.version(),
               "method": args.method, "dt": args.dt, "t_end": t_end, **case.metrics,
               "accurate": accurate}
@@ -75,7 +78,7 @@ def simulate(args) -> int:
         print_json(result)
     else:
         print_fields(result, 28)
-    passed = case.status == "ok" and accurate is not False
+    passed = case.status == "ok" and (args.accuracy is None or accurate is not False)
     return exits.OK if passed else exits.NOT_PASSED
 
 

@@ -42,9 +42,16 @@ def test_an_ok_case_exits_0_when_accurate_and_1_when_not(capsys):
     status, out, _ = run(capsys, *FOURBAR, "--accuracy", "1e-3")
     result = json.loads(out)
     assert (status, result["status"], result["accurate"]) == (0, "ok", True)
-    status, out, _ = run(capsys, *FOURBAR)  # the campaigns' default accuracy, 1e-6 rad
+    status, out, _ = run(capsys, *FOURBAR, "--accuracy", "1e-6")
     result = json.loads(out)
     assert (status, result["status"], result["accurate"]) == (1, "ok", False)
+
+
+def test_without_accuracy_the_status_alone_decides(capsys):
+    # 'accurate' printed against a campaign's default (1e-6 rad), the exit status left to 'ok'
+    status, out, _ = run(capsys, *FOURBAR)
+    result = json.loads(out)
+    assert (status, result["status"], result["accurate"]) == (0, "ok", False)
 
 
 def test_a_case_without_reference_is_judged_by_its_status_alone(capsys):
