@@ -39,6 +39,7 @@ from mbh._harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure
                                   is_missing, new_figure, outcome, plain, render)
 from mbh._harness.report.summary import Table
 from mbh._harness.model.scenario import ScenarioError
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.common.numbers import as_float, float_or_nan
 
 #: Scenario tag that puts a scene into the section.
@@ -134,7 +135,8 @@ def _tried_text(tried) -> str:
         runs = json.loads(tried) if isinstance(tried, str) else []
     except json.JSONDecodeError:
         return str(tried)
-    return ", ".join(f"{dt:.3g} {status}" + ("" if status != "ok" or as_float(error) is None
+    return ", ".join(f"{dt:.3g} {status}" + ("" if status != CaseStatus.OK
+                                             or as_float(error) is None
                                              else f" ({as_float(error):.2g})")
                      for dt, status, error in runs)
 
@@ -327,7 +329,7 @@ def _inaccurate_sentence(frame: pd.DataFrame, accuracy: float) -> str | None:
     for (adapter, method), group in frame.groupby(["adapter", "method"], sort=True):
         kinds = [outcome(row, accuracy) for row in group.to_dict("records")]
         if "inaccurate" in kinds and "accurate" not in kinds:
-            errors = group.loc[group["status"] == "ok", "main_output_error"].astype(float)
+            errors = group.loc[group["status"] == CaseStatus.OK, "main_output_error"].astype(float)
             worst.append(f"{adapter} {method} (smallest error {errors.min():.2g})")
     if not worst:
         return None
@@ -336,7 +338,7 @@ def _inaccurate_sentence(frame: pd.DataFrame, accuracy: float) -> str | None:
 
 
 def _unsupported_sentence(frame: pd.DataFrame) -> str | None:
-    chosen = frame[frame["status"] == "unsupported"] if len(frame) else frame
+    chosen = frame[frame["status"] == CaseStatus.UNSUPPORTED] if len(frame) else frame
     if chosen.empty:
         return None
     reasons = {adapter: str(group["reason"].iloc[0])

@@ -27,6 +27,7 @@ from mbh._harness.neutral.mobility import independent_rows
 from mbh._harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
                                   apply_style, new_figure, no_data, outcome, plain,
                                   render, series_style)
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.timegrid import reference_indices
 from mbh._harness.model.trajectory import Trajectory
 
@@ -37,8 +38,9 @@ Y_LABELS = {
     "max_energy_error_rel": "largest energy-balance error / energy scale",
 }
 #: Marker of a point drawn off the chart, by its label (a status, or why an ok case has no place).
-EDGE_MARKERS = {"diverged": "X", "failed": "v", "crashed": "*", "timeout": "P",
-                "unsupported": "s", "no value": "o", "no time": "d", "zero": "^"}
+EDGE_MARKERS = {CaseStatus.DIVERGED: "X", CaseStatus.FAILED: "v", CaseStatus.CRASHED: "*",
+                CaseStatus.TIMEOUT: "P", CaseStatus.UNSUPPORTED: "s", "no value": "o",
+                "no time": "d", "zero": "^"}
 #: Unit of each output kind (mbh._harness.model.mechanism.Output).
 OUTPUT_UNITS = {"joint_angle": "rad", "joint_rate": "rad/s", "joint_position": "m",
                 "position": "m", "velocity": "m/s", "point_position": "m",
@@ -82,8 +84,8 @@ def _placement(status: str, time: float, value: float) -> tuple[str, str]:
     time is zero or missing; ``("bottom", "zero")`` for an ok value of exactly 0.
     """
     if not (math.isfinite(time) and time > 0):
-        return "left", status if status != "ok" else "no time"
-    if status != "ok":
+        return "left", status if status != CaseStatus.OK else "no time"
+    if status != CaseStatus.OK:
         return "top", status
     if not (math.isfinite(value) and value >= 0):
         return "top", "no value"
@@ -101,7 +103,7 @@ def pareto_front(cases: pd.DataFrame, y: str = "main_output_error") -> pd.DataFr
         return cases
     time = cases["wall_time_s"].map(float_or_nan)
     value = cases[y].map(float_or_nan)
-    mask = (cases["status"] == "ok") & (time > 0) & np.isfinite(time) & (value > 0) \
+    mask = (cases["status"] == CaseStatus.OK) & (time > 0) & np.isfinite(time) & (value > 0) \
         & np.isfinite(value)
     candidates = cases[mask].assign(_t=time[mask], _v=value[mask]).sort_values(
         ["_t", "_v"], kind="stable")
@@ -438,7 +440,7 @@ def time_history(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
         raise ValueError(f"time_history: {mech.name} has no output {', '.join(unknown)} "
                          f"(outputs: {', '.join(o.name for o in mech.outputs)})")
     if t_end is None:
-        ended = trajectory.status == "ok" and trajectory.n_samples
+        ended = trajectory.status == CaseStatus.OK and trajectory.n_samples
         t_end = float(trajectory.times[-1]) if ended else mech.duration
     if reference is not None:
         last = float(trajectory.times[-1]) if trajectory.n_samples else 0.0
@@ -491,7 +493,7 @@ def time_history(mech: Mechanism, trajectory: Trajectory, reference: Trajectory 
         panels[-1].set_xlabel("time, s")
         _mark_failure(panels, trajectory)
         panels[0].set_title(plain(title))
-    failure = ("" if trajectory.status == "ok" else
+    failure = ("" if trajectory.status == CaseStatus.OK else
                f" The run ended {trajectory.status} at t = {_failure_time(trajectory):.4g} s "
                f"(dashed line): {trajectory.reason}")
     caption = ("Outputs of the case over the reference (grey); the absolute output errors; "
@@ -529,7 +531,7 @@ def _failure_time(trajectory: Trajectory) -> float:
 
 def _mark_failure(panels, trajectory: Trajectory) -> None:
     """A dashed line at the failure time on every panel, labelled with the status on the top."""
-    if trajectory.status == "ok":
+    if trajectory.status == CaseStatus.OK:
         return
     t = _failure_time(trajectory)
     for axes in panels:

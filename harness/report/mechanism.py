@@ -28,6 +28,7 @@ from mbh._harness.model.mechanism import GROUND, Mechanism, characteristic_lengt
 from mbh._harness.model.outputs import body_rotations
 from mbh._harness.report.style import (PALETTE, REFERENCE_COLOUR, Figure, apply_style, new_figure,
                                   no_data, plain, render)
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 
 #: The key of ``trajectories`` drawn in grey as the reference.
@@ -176,7 +177,7 @@ def _ending(trajectory: Trajectory, end: float) -> str:
     """" (diverged at 0.43 s)" for a run that did not end ok, " (to 2 s)" for an ok run shorter
     than ``end`` (s), else ""."""
     last = float(trajectory.times[-1]) if trajectory.n_samples else 0.0
-    if trajectory.status == "ok":
+    if trajectory.status == CaseStatus.OK:
         return f" (to {last:.3g} s)" if last < end - 1e-9 else ""
     stop = trajectory.failure_time if trajectory.failure_time is not None else last
     return f" ({trajectory.status} at {stop:.3g} s)"

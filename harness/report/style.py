@@ -28,6 +28,7 @@ import matplotlib
 from matplotlib.figure import Figure as MplFigure
 
 from mbh._harness.common.numbers import is_missing
+from mbh._harness.model.status import CaseStatus
 
 #: Okabe–Ito colours for lines, in the order series take them (yellow left out: too light).
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")
@@ -42,16 +43,17 @@ OUTCOME_COLOURS: dict[str, str] = {
     "accurate": "#009E73",
     "inaccurate": "#F0E442",
     "unverified": "#DDDDDD",
-    "diverged": "#D55E00",
-    "failed": "#E69F00",
-    "crashed": "#CC79A7",
-    "timeout": "#56B4E9",
-    "unsupported": "#999999",
+    CaseStatus.DIVERGED: "#D55E00",
+    CaseStatus.FAILED: "#E69F00",
+    CaseStatus.CRASHED: "#CC79A7",
+    CaseStatus.TIMEOUT: "#56B4E9",
+    CaseStatus.UNSUPPORTED: "#999999",
 }
 #: One letter per outcome, printed in stability-map cells (colour is never the only cue).
 OUTCOME_LETTERS: dict[str, str] = {
-    "accurate": "A", "inaccurate": "I", "unverified": "?", "diverged": "D", "failed": "F",
-    "crashed": "C", "timeout": "T", "unsupported": "U",
+    "accurate": "A", "inaccurate": "I", "unverified": "?", CaseStatus.DIVERGED: "D",
+    CaseStatus.FAILED: "F", CaseStatus.CRASHED: "C", CaseStatus.TIMEOUT: "T",
+    CaseStatus.UNSUPPORTED: "U",
 }
 
 _RC = {
@@ -132,7 +134,7 @@ def outcome(row: Mapping, accuracy: float | None = None) -> str:
         For a status outside the trajectory vocabulary.
     """
     status = row["status"]
-    if status != "ok":
+    if status != CaseStatus.OK:
         if status not in OUTCOME_COLOURS:
             raise ValueError(f"case row {row.get('case_id', '?')!r}: unknown status {status!r}")
         return status

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mbh._harness.model.trajectory import STATUSES
+from mbh._harness.model.status import CaseStatus
 
 #: Accuracy levels of the summary, rad or m on the main output (every decade 1e-2 … 1e-10).
 ACCURACY_LEVELS = tuple(10.0 ** -k for k in range(2, 11))
@@ -89,7 +89,7 @@ def _calibrated(seconds, calibration_s: float | None):
 def reaching(cases: pd.DataFrame, level: float) -> pd.DataFrame:
     """Cases with status ``ok`` and main-output error ≤ ``level``, fastest first."""
     error = cases["main_output_error"].astype(float)
-    hits = cases[(cases["status"] == "ok") & (error <= level)]
+    hits = cases[(cases["status"] == CaseStatus.OK) & (error <= level)]
     return hits.sort_values(["wall_time_s", "case_id"], kind="stable")
 
 
@@ -174,7 +174,7 @@ def pareto_table(cases: pd.DataFrame, levels=ACCURACY_LEVELS) -> Table:
 
 def status_counts_table(cases: pd.DataFrame) -> Table:
     """Case counts by status per scenario and adapter."""
-    statuses = [s for s in STATUSES if (cases["status"] == s).any()]
+    statuses = [s for s in CaseStatus if (cases["status"] == s).any()]
     statuses += sorted(set(cases["status"].dropna()) - set(statuses))
     rows = []
     for (scenario, adapter), group in cases.groupby(["scenario", "adapter"], sort=True):
@@ -186,7 +186,7 @@ def status_counts_table(cases: pd.DataFrame) -> Table:
 
 def failures_table(cases: pd.DataFrame) -> Table:
     """Every case whose status is not ``ok``, with its reason and failure time."""
-    failed = cases[cases["status"] != "ok"]
+    failed = cases[cases["status"] != CaseStatus.OK]
     rows = tuple((_plain(r["scenario"]), _plain(r["adapter"]), _plain(r["method"]),
                   _plain(r["dt"]), _plain(r["status"]), _plain(r["failure_time"]),
                   _plain(r["reason"])) for _, r in failed.iterrows())
@@ -227,7 +227,7 @@ def model_size_table(cases: pd.DataFrame, accuracy: float) -> Table:
         sizes = group[["n_coordinates", "n_constraint_equations", "n_redundant_equations"]]
         first = sizes.dropna().iloc[0] if sizes.dropna().shape[0] else None
         varies = sizes.dropna().drop_duplicates().shape[0] > 1
-        ok = group[group["status"] == "ok"]
+        ok = group[group["status"] == CaseStatus.OK]
         per_step = ok["wall_time_per_step_s"].astype(float).median() if len(ok) else None
         hits = reaching(group, accuracy)
         notes = group["model_notes"].dropna()
