@@ -25,7 +25,6 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from mbh._harness.common.locations import shipped
 from mbh._harness.model import scenario as scenarios
 from mbh._harness.store.reference_files import stored_reference
 from mbh._harness.report import failures, figures, mechanism, seed_compare, summary
@@ -35,6 +34,7 @@ from mbh._harness.measure.verdict import DEFAULT_ACCURACY
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
 from mbh._harness.store.location import root_or_default
 from mbh._harness.store.manifest import latest_run
+from mbh._harness.store.rerun import campaign_argument
 from mbh._harness.store.runs import RunStore
 from mbh._harness.common.errors import MbhError
 
@@ -117,18 +117,14 @@ def reproduce_commands(manifest: dict, against: str | None = None,
                        root: Path | None = None) -> str:
     """The commands that make the run of ``manifest`` again and build this report of it.
 
-    The campaign is named as ``mbh run`` takes it: by its name when the run was made from the
-    shipped campaign file of that name, else by the file's path as the manifest stores it
-    (``campaign_path``: as it was given, so a relative path holds from the folder the run was
-    made in).  ``--root`` is added when the report was built from a results root given as one.
+    The campaign is named as ``mbh run`` takes it
+    (:func:`~mbh._harness.store.rerun.campaign_argument`); ``--root`` is added when the report
+    was built from a results root given as one.
     """
-    name = manifest.get("campaign", "")
-    stored = manifest.get("campaign_path")
-    shipped_file = shipped("campaigns") / f"{name}.toml"
-    source = name if not stored or Path(stored).resolve() == shipped_file.resolve() else stored
     root_option = f" --root {shlex.quote(str(root))}" if root is not None else ""
     report = f"mbh report {manifest['run_id']}" + (f" --against {against}" if against else "")
-    return (f"mbh run {shlex.quote(str(source))}{root_option}   # made run {manifest['run_id']}\n"
+    made = f"   # made run {manifest['run_id']}"
+    return (f"mbh run {campaign_argument(manifest)}{root_option}{made}\n"
             f"{report}{root_option}")
 
 
