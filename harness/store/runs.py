@@ -65,6 +65,7 @@ from mbh._harness.store.files import write_json, write_table
 from mbh._harness.store.location import check_writable, root_or_default
 from mbh._harness.store.manifest import (MANIFEST, list_runs, manifest_of, new_manifest,
                                          timestamp)
+from mbh._harness.store.rerun import campaign_argument
 from mbh._harness.store.problems import (DAMAGE, MissingTrajectory, StoreError, StoreProblem,
                                          StoreWarning, write_problem, writing)
 from mbh._harness.store.rows import PartTable
@@ -261,7 +262,7 @@ class RunStore:
             raise StoreError(f"{error}; {what} is not stored and the run stops: run "
                              f"{self.run_id} is {marked} and keeps its {stored} stored cases "
                              f"intact; make room, then resume it with: mbh run "
-                             f"{self.manifest.get('campaign')} --resume {self.run_id}") from None
+                             f"{campaign_argument(self.manifest)} --resume {self.run_id}") from None
 
     def done_case_ids(self) -> set[str]:
         """Case ids with a stored row (whatever their status): what ``--resume`` skips."""
