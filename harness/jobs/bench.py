@@ -32,6 +32,7 @@ import numpy as np
 from mbh._adapters import adapter_names, get_adapter
 from mbh._adapters.base import UnsupportedCase
 from mbh._harness.model import scenario
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.timegrid import sample_times
 
 #: Scenarios of the overhead and fallback measurements: every shipped scene.
@@ -86,7 +87,7 @@ def _measure_overhead(adapter, model, mech, method, dt, t_end, steps, repeats) -
     simulated, bare, read_back = [], [], []
     for _ in range(repeats):  # interleaved, so that machine load disturbs both alike
         run = _simulate(adapter, model, mech, method, dt, t_end)
-        if run.status != "ok" or run.steps != steps:
+        if run.status != CaseStatus.OK or run.steps != steps:
             return _overhead_row(adapter.name, mech.name, method,
                                  note=f"run {run.status}: {run.reason}")
         simulated.append(run.wall_time_s / run.steps)
@@ -143,12 +144,13 @@ def scaling_rows(adapters=None, members=SCALING_N, dt: float = 1e-3,
             try:
                 model = adapter.build(mech)
             except UnsupportedCase as error:
-                rows.append({"adapter": name, "N": n, "status": "unsupported",
+                rows.append({"adapter": name, "N": n, "status": CaseStatus.UNSUPPORTED,
                              "s_per_sim_s": None, "note": str(error)})
                 continue
             run = _simulate(adapter, model, mech, "best", dt, t_end)
             rows.append({"adapter": name, "N": n, "status": run.status,
-                         "s_per_sim_s": run.wall_time_s / t_end if run.status == "ok" else None,
+                         "s_per_sim_s": (run.wall_time_s / t_end if run.status == CaseStatus.OK
+                                         else None),
                          "note": run.reason})
     return rows, {name: _exponent([r for r in rows if r["adapter"] == name])
                   for name in adapters or adapter_names()}

@@ -54,6 +54,7 @@ from mbh._harness.run.row import CaseWork
 from mbh._harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
+from mbh._harness.model.status import RunStatus
 from mbh._harness.store.manifest import latest_run, list_runs
 from mbh._harness.store.runs import RunStore
 from mbh._harness.common.numbers import format_number
@@ -381,7 +382,7 @@ def nightly(campaign_name: str = DEFAULT_CAMPAIGN, *, root=None, workers: int | 
         if not value > 1:
             raise ValueError(f"the {name} must be above 1, got {value!r}")
     campaign = load_campaign(campaign_name)
-    previous = latest_run(campaign.name, root, statuses=("complete",))
+    previous = latest_run(campaign.name, root, statuses=(RunStatus.COMPLETE,))
     started = time.monotonic()
     store = run_campaign(campaign, workers=workers, root=root, quiet=quiet,
                          work=case_work(campaign))

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from mbh._harness.common.machine_speed import machine_speed_s, workload_name
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.run.spec import CaseSpec
 
 #: The calibration case's identity for the executor (its row is not stored with the cases).
@@ -27,7 +28,7 @@ CALIBRATION = CaseSpec("calibration", "machine-speed", "solve_ivp+lu", 1.0, 1.0)
 def calibration_work(spec: CaseSpec) -> tuple[dict, None]:
     """The executor's work for :data:`CALIBRATION`: a row with status ``ok``, the figure as
     ``wall_time_s`` (s) and the ``workload`` that measured it; no trajectory."""
-    return ({"case_id": spec.case_id, "status": "ok", "reason": "",
+    return ({"case_id": spec.case_id, "status": CaseStatus.OK, "reason": "",
              "wall_time_s": machine_speed_s(), "workload": workload_name()}, None)
 
 
@@ -47,7 +48,8 @@ def store_figure(store, row: dict, say) -> None:
     :class:`~mbh._harness.store.runs.RunStore`); a calibration that did not end ``ok`` is reported
     through ``say`` and leaves the run without a figure."""
     seconds = row.get("wall_time_s")
-    if row.get("status") == "ok" and seconds is not None and math.isfinite(seconds) and seconds > 0:
+    measured = seconds is not None and math.isfinite(seconds) and seconds > 0
+    if row.get("status") == CaseStatus.OK and measured:
         store.set_calibration(seconds, row.get("workload"))
     else:
         say(f"mbh: calibration case ended {row.get('status')} ({row.get('reason')}); this run "

@@ -23,12 +23,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from mbh._harness.common.jsonout import dumps
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model.timegrid import EVALUATION_STEP
 
 
 def passes(row: dict) -> bool:
     """Whether a sweep run counts as stable: ``ok`` and not known to be inaccurate."""
-    return row.get("status") == "ok" and row.get("accurate") is not False
+    return row.get("status") == CaseStatus.OK and row.get("accurate") is not False
 
 
 @dataclass

@@ -26,6 +26,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_complete
 from dataclasses import dataclass
 
 from mbh._harness.common import waits
+from mbh._harness.model.status import CaseStatus
 
 #: (scene, method, dt s, t_end s, what it compiles) of each phase, longest first.
 PHASES = (
@@ -102,7 +103,8 @@ def _run(case: WarmCase) -> Warmed:
         else:
             trajectories = [get_adapter("inhouse").simulate(mech, case.method, case.dt,
                                                             case.t_end, np.zeros(1))]
-        problem = "; ".join(f"{t.status}: {t.reason}" for t in trajectories if t.status != "ok")
+        problem = "; ".join(f"{t.status}: {t.reason}" for t in trajectories
+                            if t.status != CaseStatus.OK)
     except Exception as error:  # noqa: BLE001 — a failed warm-up case only costs a later wait
         problem = f"{type(error).__name__}: {error}"
     return Warmed(case, time.perf_counter() - began, problem)
