@@ -1,8 +1,11 @@
-"""mbh: the harness's public Python API.
+"""mbh: the harness's Python API.
 
-Load a scene or build one, run one case or a whole campaign, read the stored runs.  Everything a
-user needs is named here; the ``harness`` and ``adapters`` packages behind it are internal.
-docs/api.md documents each name with runnable examples (the tests run them).
+Load a scene or build one, run one case or a whole campaign, read the stored runs.  The public API
+is three modules: this one, :mod:`mbh.adapters` (the contract an adapter for your own solver
+implements) and :mod:`mbh.testing` (tolerance assertions for your test suite).  Every module
+whose name starts with an underscore (``mbh._harness``, ``mbh._adapters``) is private and may
+change between releases.  docs/api.md documents each public name with runnable examples (the
+tests run them).
 
 Examples
 --------
@@ -32,8 +35,8 @@ from mbh._harness.store.manifest import list_runs
 from mbh._harness.store.runs import RunStore, load_run
 
 
-def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool = False,
-                 resume: str | None = None, quiet: bool = True) -> RunStore:
+def run_campaign(campaign, *, adapters=(), workers: int | None = None, root=None,
+                 reuse: bool = False, resume: str | None = None, quiet: bool = True) -> RunStore:
     """Run a campaign into the result store, as ``mbh run`` does.
 
     Parameters
@@ -41,16 +44,23 @@ def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool
     campaign : str or Path
         A shipped campaign name or a campaign file (its scenarios by shipped name or by path
         relative to the file).
+    adapters : iterable of Adapter subclasses or instances
+        Your own adapters, not registered, which the file names by their ``name`` (and
+        ``adapters = "all"`` includes).  Each case runs in a worker process of its own, which
+        imports the class by name: define it at the top level of an importable module (not in
+        the script being run, nor inside a function); an instance must pickle.  Their cases are
+        never taken from nor kept in the ``reuse`` cache.
     workers : int, optional
         Worker processes (default: the cores).
     root : path, optional
         Results root (default :func:`results_root`).
     reuse : bool
-        Copy identical cases from the cache instead of running them.
+        Copy identical cases of registered adapters from the cache instead of running them.
     resume : str, optional
         Run id of an interrupted run of the same campaign file to complete.
     quiet : bool
-        No progress bar and no notes on stderr (default for the API).
+        No progress bar and no notes on stderr (default for the API; the notes are in the
+        manifest's ``notes`` either way, e.g. the third-party adapters ``"all"`` took in).
 
     Returns
     -------
@@ -61,10 +71,14 @@ def run_campaign(campaign, *, workers: int | None = None, root=None, reuse: bool
     ------
     CampaignError
         The file does not validate (every problem, naming the file and field).
+    MbhError
+        A run that cannot start as asked: a given adapter that cannot stand for one or cannot
+        reach the worker processes (the message says what it needs), a bad worker count, an
+        unknown run to resume.
     """
     from mbh._harness.run.campaign import run_campaign as run
 
-    return run(load_campaign(campaign), workers=workers, root=root, reuse=reuse,
+    return run(load_campaign(campaign, adapters), workers=workers, root=root, reuse=reuse,
                resume=resume, quiet=quiet)
 
 

@@ -36,9 +36,10 @@ import threading
 
 from mbh._harness.model import scenario
 from mbh._harness.common.environment import code_fingerprint
-from mbh._harness.run.calibration import CALIBRATION, WithCalibration, calibration_work, store_figure
+from mbh._harness.run.calibration import (CALIBRATION, WithCalibration, calibration_work,
+                                          store_figure)
 from mbh._harness.run.row import CaseWork
-from mbh._harness.run.executor import WorkerProcesses, execute, usable_cores
+from mbh._harness.run.executor import WorkerProcesses, execute, usable_cores, why_not_sendable
 from mbh._harness.references.build import ReferenceBuildError, reference_trajectory
 from mbh._harness.store.cache import CaseCache
 from mbh._harness.store.runs import RunStore
@@ -154,14 +155,32 @@ def _open_store(campaign, resume: str | None, root) -> RunStore:
     return store
 
 
+def check_given_adapters(campaign) -> None:
+    """Raise :class:`RunnerError` unless every adapter the campaign was given as a class or an
+    instance (:attr:`~mbh._harness.run.spec.Campaign.given_adapters`) can reach the worker
+    processes its cases run in (:func:`~mbh._harness.run.executor.why_not_sendable`)."""
+    for name, adapter in campaign.given_adapters:
+        problem = why_not_sendable(adapter)
+        if problem:
+            raise RunnerError(
+                f"adapter {name!r} cannot reach the campaign's worker processes: {problem}. "
+                f"Every case runs in a process of its own, which imports the adapter's class by "
+                f"name: define it at the top level of a module on sys.path (beside your script, "
+                f"not in it) and pass that class, or a picklable instance of it")
+
+
 class _Recorder:
     """Stores each finished case (and offers it to the cache).
 
     ``keys`` maps scenario names to content hashes and adapter names to versions; ``settings``
-    is the cache's last key part (:func:`_cache_settings`)."""
+    is the cache's last key part (:func:`_cache_settings`).  The cases of ``uncached`` adapters
+    (given as classes or instances: their code is not in the cache key's fingerprint) are
+    neither taken from the cache nor offered to it."""
 
-    def __init__(self, store: RunStore, cache: CaseCache, keys: dict, settings: str):
+    def __init__(self, store: RunStore, cache: CaseCache, keys: dict, settings: str,
+                 uncached: frozenset[str] = frozenset()):
         self.store, self.cache, self.keys, self.settings = store, cache, keys, settings
+        self.uncached = uncached
 
     def key(self, spec) -> tuple[str, str, str]:
         """(scenario content hash, adapter version, settings) of ``spec``, the cache's key
@@ -170,13 +189,15 @@ class _Recorder:
 
     def record(self, spec, row: dict, trajectory) -> None:
         self.store.add(row, trajectory)
-        self.cache.put(spec, *self.key(spec), row, trajectory, run_id=self.store.run_id)
+        if spec.adapter not in self.uncached:
+            self.cache.put(spec, *self.key(spec), row, trajectory, run_id=self.store.run_id)
 
     def reuse(self, specs: list) -> list:
         """Store the cached cases among ``specs``; return the ones still to run."""
         remaining = []
         for spec in specs:
-            found = self.cache.lookup(spec, *self.key(spec))
+            found = None if spec.adapter in self.uncached else self.cache.lookup(
+                spec, *self.key(spec))
             if found is None:
                 remaining.append(spec)
             else:
@@ -247,10 +268,12 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     root : path, optional
         Results root (default :func:`mbh._harness.store.runs.results_root`).
     quiet : bool
-        No progress bar and no notes on stderr.
+        No progress bar and no notes on stderr (the campaign's
+        :attr:`~mbh._harness.run.spec.Campaign.notes` are in the manifest's ``notes`` either way).
     work : callable, optional
         ``work(spec) -> (row, trajectory)`` run in the workers; default
-        :class:`~mbh._harness.run.row.CaseWork` with the campaign's bounds and accuracy.
+        :class:`~mbh._harness.run.row.CaseWork` with the campaign's bounds, accuracy and given
+        adapters.
     warm_workers : bool
         Locally, fork each case's process from the warm template (default) rather than start a
         fresh interpreter per case (:class:`mbh._harness.run.executor.WorkerProcesses`).
@@ -267,8 +290,9 @@ def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None 
     StopSignal
         On a stop signal before the run was stored (a KeyboardInterrupt, as Ctrl-C then).
     RunnerError
-        A bad worker count, an unreachable scheduler, an unknown run to resume, or a run of
-        another campaign file.
+        A bad worker count, an unreachable scheduler, an unknown run to resume, a run of
+        another campaign file, or an adapter given as a class or instance that cannot reach the
+        worker processes (:func:`check_given_adapters`).
     """
     with stop_signals_interrupt():
         return _run_campaign(campaign, workers=workers, scheduler=scheduler, resume=resume,
@@ -282,7 +306,10 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
         if not quiet:
             print(text, file=sys.stderr)
 
-    work = work or CaseWork(campaign.bounds, campaign.accuracy)
+    check_given_adapters(campaign)
+    for note in campaign.notes:
+        say(f"mbh: {note}")
+    work = work or CaseWork(campaign.bounds, campaign.accuracy, campaign.given_adapters)
     if scheduler is None:
         workers = timed_workers(workers, say)
     else:
@@ -298,6 +325,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     prepare_references(names, say)
     backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)
+    store.manifest["notes"] = list(campaign.notes)  # written with the next manifest write
     try:
         calibrate = campaign.calibration and store.calibration_s is None
         if calibrate and template_starting:
@@ -305,9 +333,10 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
             calibrate = False
         done = store.done_case_ids()
         todo = [spec for spec in campaign.cases if spec.case_id not in done]
+        given = frozenset(name for name, _ in campaign.given_adapters)
         recorder = _Recorder(store, CaseCache(root), _cache_keys(
-            {spec.scenario for spec in todo}, {spec.adapter for spec in todo}),
-            _cache_settings(campaign))
+            {spec.scenario for spec in todo}, {spec.adapter for spec in todo} - given),
+            _cache_settings(campaign), given)
         if reuse:
             todo = recorder.reuse(todo)
 

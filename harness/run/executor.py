@@ -364,6 +364,38 @@ def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
     return value
 
 
+def _importable(name: str) -> bool:
+    """Whether a fresh interpreter with this ``sys.path`` finds the top-level module ``name``
+    (asked of the import finders themselves: ``sys.modules`` may hold a module imported by path,
+    as pytest's ``--import-mode=importlib`` does, that no other process can import)."""
+    return name in sys.builtin_module_names or any(
+        finder.find_spec(name, None) is not None
+        for finder in sys.meta_path if hasattr(finder, "find_spec"))
+
+
+def why_not_sendable(value) -> str | None:
+    """Why ``value`` (a class, or an instance of one) cannot reach a worker process, or None.
+
+    A worker unpickles what it runs: a class travels by its importable name, so it must be
+    defined at the top level of a module that a fresh interpreter on this ``sys.path`` imports
+    (not in ``__main__``, the script being run, nor inside a function), and an instance must
+    pickle.
+    """
+    cls = value if isinstance(value, type) else type(value)
+    if "<locals>" in cls.__qualname__:
+        return f"class {cls.__qualname__} is defined inside a function"
+    if cls.__module__ == "__main__":
+        return f"class {cls.__qualname__} is defined in the script being run (__main__)"
+    if not _importable(cls.__module__.partition(".")[0]):
+        return (f"module {cls.__module__} of class {cls.__qualname__} cannot be imported by "
+                f"name from sys.path")
+    try:
+        pickle.dumps(value)
+    except (pickle.PicklingError, TypeError, AttributeError) as error:
+        return f"it does not pickle ({type(error).__name__}: {error})"
+    return None
+
+
 def _run_and_exit(result_path: str, load_case: Callable) -> None:
     """Worker side: ``work, spec = load_case()``, run, write the pickled ``("done", (row,
     trajectory))`` or ``("raised", message)`` atomically, exit at once."""

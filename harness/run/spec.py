@@ -6,6 +6,11 @@ its field path and raises one :class:`CampaignError` listing them all (the style
 :mod:`mbh._harness.model.scenario`), before anything runs.  Expansion into :class:`CaseSpec` objects is
 deterministic; a case produced twice is kept once, with the earlier group's settings.
 
+Adapters are named as registered (built-in, or installed by an entry point), or given to
+:func:`load_campaign` as classes or instances (a solver without packaging: its name is the
+adapter's ``name``).  ``adapters = "all"`` is every registered adapter and every given one; the
+third-party ones it took in are said in :attr:`Campaign.notes`.
+
 The file format (keys, defaults, the rules checked, expansion order, an example) is documented in
 ``docs/formats/campaign.md``.
 """
@@ -17,7 +22,8 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from mbh._adapters import AdapterLoadError, adapter_names, get_adapter
+from mbh._adapters import (AdapterChoiceError, AdapterLoadError, adapter_names, get_adapter,
+                          registrations, resolve_adapter)
 from mbh._adapters.base import Adapter, steps_in
 from mbh._harness.model import scenario
 from mbh._harness.model.mechanism import Mechanism
@@ -53,7 +59,8 @@ class CaseSpec:
         Shipped scenario name, family member (``family@parameter``) or the absolute path of a
         scenario file (a campaign names it relative to itself; :meth:`_Reader._scenario_name`).
     adapter : str
-        Registry name.
+        The adapter's name: registered, or the ``name`` of an adapter given as a class or an
+        instance (:func:`load_campaign`, :func:`mbh.run_case`).
     method : str
         Method string ``NAME[:key=value,...]`` as written in the campaign.
     dt : float
@@ -131,6 +138,11 @@ class Campaign:
     calibration : bool
         Whether a run starts with the calibration case.
     description : str
+    notes : tuple of str
+        What a reader of the run must know about how the file was read: the third-party
+        adapters that ``adapters = "all"`` took in.
+    given_adapters : tuple of (str, type or Adapter)
+        The adapters given to :func:`load_campaign` as classes or instances, by name, as given.
     """
 
     name: str
@@ -142,6 +154,8 @@ class Campaign:
     sweep: SweepSpec | None
     calibration: bool
     description: str = ""
+    notes: tuple[str, ...] = ()
+    given_adapters: tuple[tuple[str, Any], ...] = ()
 
 
 class CampaignError(MbhError, ValueError):
@@ -169,14 +183,26 @@ def main_output(mech: Mechanism) -> str:
     return mech.outputs[0].name
 
 
-def load_campaign(name_or_path: str | Path) -> Campaign:
+def load_campaign(name_or_path: str | Path, adapters=()) -> Campaign:
     """Load, validate and expand a campaign by shipped name or by path.
+
+    Parameters
+    ----------
+    name_or_path : str or Path
+    adapters : iterable of Adapter subclasses or instances
+        Adapters that are not registered, which the file names by their ``name``
+        (:func:`mbh._adapters.resolve_adapter`); ``adapters = "all"`` includes them.
 
     Raises
     ------
     CampaignError
         With every problem found, each naming the file and the field.
+    AdapterChoiceError
+        A given adapter that cannot stand for one, or two given adapters of one name.
+    AdapterLoadError
+        A given adapter class that fails to construct.
     """
+    given = _given(adapters)
     path = campaign_path(name_or_path)
     file = str(path)
     try:
@@ -187,7 +213,21 @@ def load_campaign(name_or_path: str | Path) -> Campaign:
             from None
     except ValueError as error:
         raise CampaignError([Problem(file, "-", str(error))]) from None
-    return _Reader(file, document, path.resolve().parent).read(path, text)
+    return _Reader(file, document, path.resolve().parent, given).read(path, text)
+
+
+def _given(adapters) -> dict[str, tuple[Any, Adapter]]:
+    """Name → (the class or instance as given, the adapter it stands for)."""
+    given = {}
+    for adapter in adapters:
+        if isinstance(adapter, str):
+            raise AdapterChoiceError(f"adapters: give classes or instances, not the name "
+                                     f"{adapter!r} (registered adapters are named in the file)")
+        resolved = resolve_adapter(adapter)
+        if resolved.name in given:
+            raise AdapterChoiceError(f"adapters: two adapters given are named {resolved.name!r}")
+        given[resolved.name] = (adapter, resolved)
+    return given
 
 
 class _Unloadable:
@@ -202,13 +242,18 @@ class _Unloadable:
 class _Reader:
     """Turns a parsed campaign document into a :class:`Campaign`, collecting problems."""
 
-    def __init__(self, file: str, document: dict, folder: Path):
+    def __init__(self, file: str, document: dict, folder: Path,
+                 given: dict[str, tuple[Any, Adapter]]):
         self.c = _Collector(file)
         self.document = document
         self.folder = folder
+        self.given = given
         self._mechanisms: dict[str, Mechanism | None] = {}
-        self._adapters: dict[str, Adapter | _Unloadable] = {}
+        self._adapters: dict[str, Adapter | _Unloadable] = {
+            name: resolved for name, (_, resolved) in given.items()}
         self._methods_checked: set[tuple[str, str]] = set()
+        #: Third-party registered adapters that ``adapters = "all"`` took in: name → label.
+        self._through_all: dict[str, str] = {}
 
     def read(self, path: Path, text: str) -> Campaign:
         doc, c = self.document, self.c
@@ -230,7 +275,16 @@ class _Reader:
             raise CampaignError(c.problems)
         return Campaign(name=path.stem, path=path, text=text, cases=tuple(cases), bounds=bounds,
                         accuracy=accuracy, sweep=sweep, calibration=calibration,
-                        description=description)
+                        description=description, notes=self._notes(),
+                        given_adapters=tuple((name, adapter)
+                                             for name, (adapter, _) in self.given.items()))
+
+    def _notes(self) -> tuple[str, ...]:
+        if not self._through_all:
+            return ()
+        return (f'adapters = "all" took in the third-party {", ".join(self._through_all.values())}'
+                f'; name the adapters in the file to leave '
+                f'{"it" if len(self._through_all) == 1 else "them"} out',)
 
     # --- settings -----------------------------------------------------------------------------
 
@@ -304,10 +358,22 @@ class _Reader:
                 return None
         return self._mechanisms[name]
 
+    def _known_adapters(self) -> list[str]:
+        """The registered adapters' names, then the given ones'."""
+        return [*adapter_names(), *self.given]
+
+    def _note_third_party(self) -> None:
+        """Remember the third-party registered adapters, which ``adapters = "all"`` took in,
+        for :attr:`Campaign.notes`."""
+        for name, found in registrations().items():
+            if not found.built_in:
+                self._through_all[name] = found.label
+
     def _adapter(self, name: Any, field: str) -> Adapter | _Unloadable | None:
-        """The registered adapter ``name`` (an :class:`_Unloadable` when it cannot be loaded);
-        None, with the problem recorded, for a name that is not registered."""
-        known = adapter_names()
+        """The adapter ``name`` (an :class:`_Unloadable` when a registered one cannot be
+        loaded); None, with the problem recorded, for a name that is neither registered nor
+        given."""
+        known = self._known_adapters()
         if not isinstance(name, str) or name not in known:
             self.c.add(field, f"unknown adapter {name!r} (known: {', '.join(known)})")
             return None
@@ -368,7 +434,9 @@ class _Reader:
             chosen = {name: (value, f"{field}.{name}") for name, value in methods.items()}
             fields_of = {name: f"{field}.{name}" for name in methods}
         elif isinstance(methods, list):
-            adapters = self._names(table, "adapters", path, adapter_names())
+            adapters = self._names(table, "adapters", path, self._known_adapters())
+            if table.get("adapters") == "all":
+                self._note_third_party()
             chosen = {name: (methods, field) for name in adapters}
             fields_of = {name: f"{_join(path, 'adapters')}[{i}]" for i, name in enumerate(adapters)}
         else:

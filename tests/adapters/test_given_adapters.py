@@ -5,6 +5,7 @@ one.  The adapter is the toy of the adapter guide, written against ``mbh.adapter
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 
@@ -12,6 +13,8 @@ import pandas as pd
 import pytest
 
 import mbh
+from mbh._adapters import resolve_adapter
+from mbh._harness.run.campaign import run_campaign
 from mbh.adapters import AdapterLoadError
 
 #: The columns that differ between two runs of one case: its wall times.
@@ -81,3 +84,97 @@ def test_a_class_that_fails_to_construct_is_named(toy_module):
             "adapter class tests.adapters.test_given_adapters:Unlicensed cannot be constructed: "
             "OSError: no licence file")):
         mbh.run_case("fourbar", broken, "best", dt=1e-3, t_end=0.1)
+
+
+CAMPAIGN = """\
+description = "your solver beside a built-in engine"
+calibration = false
+
+[t_end]
+"*" = 0.2
+
+[[group]]
+scenarios = ["fourbar"]
+adapters = ADAPTERS
+methods = ["best"]
+dts = [1e-3]
+"""
+
+
+#: The note of a campaign whose ``adapters = "all"`` took in the registered toy adapter.
+ALL_TOOK_THE_TOY = ('adapters = "all" took in the third-party adapter \'toy\' from package '
+                    'mbh-toy-adapter 0.1.0; name the adapters in the file to leave it out')
+
+
+def campaign_file(folder, adapters: str):
+    path = folder / "mine.toml"
+    path.write_text(CAMPAIGN.replace("ADAPTERS", adapters))
+    return path
+
+
+def test_a_campaign_runs_a_given_class_in_its_workers_as_run_case_does(toy_module, tmp_path):
+    from mbh_toy_adapter import ToyAdapter
+
+    path = campaign_file(tmp_path, '["toy", "mujoco"]')
+    with pytest.raises(mbh.CampaignError, match=r"group\[0\]\.adapters\[0\]: unknown adapter 'toy'"):
+        mbh.load_campaign(path)
+    run = mbh.run_campaign(path, adapters=[ToyAdapter()], workers=1, root=tmp_path / "results")
+    stored = run.cases().set_index("adapter")
+    assert list(stored["status"]) == ["ok", "ok"]
+    in_process = case_row(ToyAdapter).set_index("adapter")
+    columns = [column for column in in_process.columns if column in stored.columns]
+    pd.testing.assert_frame_equal(stored.loc[["toy"], columns], in_process[columns],
+                                  check_dtype=False)
+
+
+def test_an_adapter_that_cannot_reach_the_workers_is_refused_with_what_it_needs(toy_module,
+                                                                                 tmp_path):
+    from mbh_toy_adapter import ToyAdapter
+
+    class Local(ToyAdapter):
+        name = "local"
+
+    unpicklable = ToyAdapter()
+    unpicklable.hook = lambda: None
+    refused = {
+        Local: "class test_an_adapter_that_cannot_reach_the_workers_is_refused_with_what_it_"
+               "needs.<locals>.Local is defined inside a function",
+        toy_subclass("Scripted", __module__="__main__", name="scripted"):
+            "class Scripted is defined in the script being run (__main__)",
+        toy_subclass("Elsewhere", __module__="not_on_the_path", name="elsewhere"):
+            "module not_on_the_path of class Elsewhere cannot be imported by name from sys.path",
+        toy_subclass("Unlisted", name="unlisted"): "it does not pickle (PicklingError",
+        unpicklable: "it does not pickle (AttributeError: Can't pickle local object",
+    }
+    for adapter, problem in refused.items():
+        name = resolve_adapter(adapter).name
+        path = campaign_file(tmp_path, f'["{name}"]')
+        with pytest.raises(mbh.MbhError, match=re.escape(
+                f"adapter {name!r} cannot reach the campaign's worker processes: {problem}")) \
+                as refusal:
+            mbh.run_campaign(path, adapters=[adapter], root=tmp_path / "results")
+        assert "define it at the top level of a module on sys.path" in str(refusal.value)
+    assert not (tmp_path / "results").exists()  # refused before anything ran
+
+
+def test_all_takes_in_given_and_installed_adapters_but_shipped_campaigns_do_not(toy,
+                                                                                 tmp_path):
+    mine = toy_subclass("MyToy", name="mine")
+    taken = mbh.load_campaign(campaign_file(tmp_path, '"all"'), adapters=[mine])
+    assert [case.adapter for case in taken.cases] == [
+        "inhouse", "mujoco", "pybullet", "pinocchio", "exudyn", "toy", "mine"]
+    assert taken.notes == (ALL_TOOK_THE_TOY,)
+    smoke = mbh.load_campaign("smoke")
+    assert {case.adapter for case in smoke.cases} == {
+        "inhouse", "mujoco", "pybullet", "pinocchio", "exudyn"}
+    assert smoke.notes == ()
+
+
+def test_a_run_that_all_took_a_third_party_adapter_into_says_so(toy, tmp_path, capsys):
+    campaign = mbh.load_campaign(campaign_file(tmp_path, '"all"'))
+    toy_cases = tuple(case for case in campaign.cases if case.adapter == "toy")
+    store = run_campaign(dataclasses.replace(campaign, cases=toy_cases), workers=1,
+                         root=tmp_path / "results", quiet=False)
+    assert f"mbh: {ALL_TOOK_THE_TOY}" in capsys.readouterr().err.splitlines()
+    assert mbh.list_runs(tmp_path / "results")[0]["notes"] == [ALL_TOOK_THE_TOY]
+    assert list(store.cases()["status"]) == ["ok"]
