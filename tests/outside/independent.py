@@ -98,15 +98,21 @@ def world_inertias(trajectory, inertias: np.ndarray) -> np.ndarray:
     return turn @ inertias @ np.swapaxes(turn, -1, -2)
 
 
-def mechanical_energy(trajectory, mech: mbh.Mechanism) -> np.ndarray:
-    """T + V at every sample, J: Σ ½ m v·v + ½ ωᵀ (A I Aᵀ) ω − m g·r over the moving bodies
-    (gravity's potential; the mechanisms checked carry no springs)."""
+def kinetic_energy(trajectory, mech: mbh.Mechanism) -> np.ndarray:
+    """T = Σ ½ m v·v + ½ ωᵀ (A I Aᵀ) ω over the moving bodies at every sample, J."""
     masses, inertias = mass_properties(mech)
     omega = trajectory.angular_velocity
     spin = np.einsum("tbi,tbij,tbj->t", omega, world_inertias(trajectory, inertias), omega)
     motion = np.einsum("b,tbi,tbi->t", masses, trajectory.velocity, trajectory.velocity)
+    return 0.5 * (motion + spin)
+
+
+def mechanical_energy(trajectory, mech: mbh.Mechanism) -> np.ndarray:
+    """T + V at every sample, J: :func:`kinetic_energy` and gravity's potential −Σ m g·r (the
+    mechanisms checked carry no springs)."""
+    masses, _ = mass_properties(mech)
     height = np.einsum("b,tbi,i->t", masses, trajectory.position, np.asarray(mech.gravity))
-    return 0.5 * (motion + spin) - height
+    return kinetic_energy(trajectory, mech) - height
 
 
 def angular_momentum(trajectory, mech: mbh.Mechanism, bodies=None) -> np.ndarray:
