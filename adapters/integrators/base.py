@@ -34,8 +34,9 @@ Failures
 ``step()`` never raises for a numerical failure: a non-finite state or one whose norm exceeds
 ``divergence_limit`` sets ``status = IntegratorState.DIVERGED``; a ``FloatingPointError``,
 ``LinAlgError`` or ``ValueError`` raised by the problem, or a method's own failure
-(:class:`StepFailure`, e.g. Newton not converging), sets ``status = IntegratorState.FAILED``.  Either way ``failure_time`` is the time the failed
-step was heading for, ``failure_reason`` says why, and ``t, q, v`` keep the last good state.
+(:class:`StepFailure`, e.g. Newton not converging), sets ``status = IntegratorState.FAILED``.
+Either way ``failure_time`` is the time the failed step was heading for, ``failure_reason`` says
+why, and ``t, q, v`` keep the last good state.
 """
 
 from __future__ import annotations
@@ -221,7 +222,8 @@ class Integrator:
             self._fail(IntegratorState.DIVERGED, t_new, "non-finite state")
             return None
         if max(squared_q, squared_v) > limit * limit:
-            self._fail(IntegratorState.DIVERGED, t_new, f"state norm exceeds divergence_limit={limit:g}")
+            self._fail(IntegratorState.DIVERGED, t_new,
+                       f"state norm exceeds divergence_limit={limit:g}")
             return None
         return t_new, q_new, v_new
 
