@@ -9,9 +9,10 @@ process of their own.
   ratios.  An isolated case runs as a campaign's does (:func:`mbh._harness.run.executor.run_isolated`):
   an engine that crashes or hangs gives a ``crashed`` or ``timeout`` case, the signal named in its
   reason, and the test session goes on;
-* :func:`campaign_cases`, a campaign file turned into (readable id, case) pairs for parametrized
-  tests (ids like ``fourbar-mujoco-best-dt1e-3``), and :class:`Selection`, the command line's
-  choice of scenarios and adapters.
+* :func:`campaign_cases` and :func:`campaign_params`, a campaign file turned into (readable id,
+  case) pairs and ``pytest.param`` objects for parametrized tests (ids like
+  ``fourbar-mujoco-best-dt1e-3``), and :class:`Selection`, the command line's choice of scenarios
+  and adapters.
 """
 
 from __future__ import annotations
@@ -88,6 +89,16 @@ def campaign_cases(name_or_path, scenarios=None, adapters=None) -> list[tuple[st
     shared = {label for label in labels if labels.count(label) > 1}
     return [(f"{label}-t{spec.t_end:g}" if label in shared else label, spec)
             for label, spec in zip(labels, cases)]
+
+
+def campaign_params(name_or_path, scenarios=None, adapters=None) -> list:
+    """A campaign's cases as ``pytest.param(case, id=label)`` for
+    ``@pytest.mark.parametrize`` (:func:`campaign_cases`, same arguments; ids like
+    ``fourbar-mujoco-best-dt1e-3``)."""
+    import pytest  # here: the assertions and the runner are usable without pytest
+
+    return [pytest.param(spec, id=label)
+            for label, spec in campaign_cases(name_or_path, scenarios, adapters)]
 
 
 @dataclass(frozen=True)

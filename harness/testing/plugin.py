@@ -9,15 +9,20 @@ Thin wrappers over :mod:`mbh._harness.testing.cases` and :mod:`mbh._harness.test
   (a :class:`~mbh._harness.model.trajectory.Trajectory`, None when it has none);
 * fixture ``mbh_tolerances``: the :class:`~mbh._harness.testing.tolerances.Tolerances` of ``tolerances.toml``
   beside the test file (``--mbh-tolerances FILE`` names another), loaded once per file;
-* :func:`campaign_params`: a campaign's cases as ``pytest.param`` objects with readable ids
-  (``fourbar-mujoco-best-dt1e-3``), for ``@pytest.mark.parametrize``;
 * options ``--mbh-scenarios A,B`` and ``--mbh-adapters X,Y``: only those run; a test
   parametrized with an unselected case is skipped at collection, with the reason;
 * option ``--mbh-isolated`` and marker ``@pytest.mark.mbh_isolated``: the cases of every test
   (of the marked tests) run each in a worker process of its own, as a campaign's do, so an engine
   that crashes or hangs fails that test (status ``crashed`` or ``timeout``, the signal named) and
   the session goes on.  In-process is the default: isolation costs a process start per case
-  (docs/formats/tolerances.md, "Isolated cases", gives the measured cost).
+  (docs/formats/tolerances.md, "Isolated cases", gives the measured cost);
+* options ``--mbh-record`` and ``--mbh-record-margin FACTOR``: record, then assert.  Every case a
+  test looks up in ``mbh_tolerances`` is measured and its tolerances are written into that
+  fixture's file at the session's end (:mod:`mbh._harness.testing.recording`: FACTOR, default
+  :data:`RECORD_MARGIN`, times each measured error); each such test is reported failed with the
+  files it recorded into, as pytest-regressions' ``--force-regen`` reports a regenerated file,
+  so a recording session is never mistaken for a passing one.  Later sessions without the option
+  assert against the files.
 
 The assertion helpers are the plain functions of :mod:`mbh._harness.testing.tolerances`.  This module imports
 nothing heavy at load time: pytest loads it in every session of this environment.
@@ -31,6 +36,13 @@ import pytest
 
 #: File name of the tolerance table looked up beside a test file.
 TOLERANCE_FILE = "tolerances.toml"
+#: ``--mbh-record``'s default margin: a recorded tolerance is this many times the measured value.
+RECORD_MARGIN = 10.0
+#: The session's :class:`~mbh._harness.testing.recording.ToleranceRecording` under
+#: ``--mbh-record``.
+_RECORDING = pytest.StashKey()
+#: Per test: the tolerance files it recorded into.
+_RECORDED_INTO = pytest.StashKey()
 
 
 def pytest_addoption(parser) -> None:
@@ -47,11 +59,62 @@ def pytest_addoption(parser) -> None:
     group.addoption("--mbh-tolerances", default=None, metavar="FILE",
                     help=f"tolerance file of the fixture mbh_tolerances (default: "
                          f"{TOLERANCE_FILE} beside each test file)")
+    group.addoption("--mbh-record", action="store_true", default=False,
+                    help="record the tolerances of every case a test looks up in mbh_tolerances "
+                         "into its tolerance file (the measured errors times "
+                         "--mbh-record-margin); each recording test is reported failed, as "
+                         "recorded; run again without this option to assert against the file")
+    group.addoption("--mbh-record-margin", type=float, default=RECORD_MARGIN, metavar="FACTOR",
+                    help=f"--mbh-record: a recorded tolerance is FACTOR (> 1) times the measured "
+                         f"value (default {RECORD_MARGIN:g})")
 
 
 def pytest_configure(config) -> None:
     config.addinivalue_line("markers", "mbh_isolated: run this test's mbh cases each in a worker "
                                        "process of its own (a crash fails the test, not the session)")
+    if config.getoption("--mbh-record"):
+        config.stash[_RECORDING] = _recording(config)
+
+
+def _recording(config):
+    """The session's ToleranceRecording; a usage error for a bad margin or several processes."""
+    from mbh._harness.testing.cases import ToleranceError
+    from mbh._harness.testing.recording import ToleranceRecording
+
+    if config.getoption("numprocesses", default=None) not in (None, 0):
+        raise pytest.UsageError("--mbh-record records in one process: run it without -n "
+                                "(pytest-xdist)")
+    try:
+        return ToleranceRecording(config.getoption("--mbh-record-margin"))
+    except ToleranceError as error:
+        raise pytest.UsageError(str(error)) from None
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    """A test that recorded tolerances and passed is reported failed, naming the files."""
+    report = yield
+    files = item.stash.get(_RECORDED_INTO, None)
+    if files and report.when == "call" and report.passed:
+        report.outcome = "failed"
+        report.longrepr = (f"mbh: tolerances recorded into {', '.join(sorted(map(str, files)))} "
+                           f"(--mbh-record); run without --mbh-record to assert against them")
+    return report
+
+
+def pytest_sessionfinish(session) -> None:
+    """Write the tolerance files recorded into this session (``--mbh-record``)."""
+    recording = session.config.stash.get(_RECORDING, None)
+    if recording is not None:
+        recording.write()
+
+
+def pytest_terminal_summary(terminalreporter, config) -> None:
+    recording = config.stash.get(_RECORDING, None)
+    for path in (recording.files if recording is not None else ()):
+        terminalreporter.write_line(f"mbh: recorded {len(recording.files[path])} cases' "
+                                    f"tolerances into {path} (margin "
+                                    f"{recording.margin:g} x the measured values)")
 
 
 def _selection(config):
@@ -85,15 +148,6 @@ def pytest_collection_modifyitems(config, items) -> None:
                    if (reason := selection.reason(spec)) is not None]
         if reasons:
             item.add_marker(pytest.mark.skip(reason=f"mbh: {reasons[0]}"))
-
-
-def campaign_params(name_or_path, scenarios=None, adapters=None) -> list:
-    """A campaign's cases as ``pytest.param(case, id=label)``
-    (:func:`mbh._harness.testing.cases.campaign_cases`, same arguments)."""
-    from mbh._harness.testing.cases import campaign_cases
-
-    return [pytest.param(spec, id=label)
-            for label, spec in campaign_cases(name_or_path, scenarios, adapters)]
 
 
 class _SelectingRunner:
@@ -152,14 +206,33 @@ def _mbh_tolerance_files():
     return {}
 
 
+class _RecordingTolerances:
+    """``mbh_tolerances`` under ``--mbh-record``: ``for_case(case)`` runs the case (or takes it
+    from the session), records its tolerances for ``path`` and returns the measured status
+    alone, which the test's assertion then holds."""
+
+    def __init__(self, path: Path, recording, runner, item):
+        self.path, self._recording, self._runner, self._item = path, recording, runner, item
+
+    def for_case(self, spec):
+        tolerance = self._recording.record(self.path, self._runner.run(spec))
+        self._item.stash.setdefault(_RECORDED_INTO, set()).add(self.path)
+        return tolerance
+
+
 @pytest.fixture
 def mbh_tolerances(request, _mbh_tolerance_files):
     """The :class:`mbh._harness.testing.tolerances.Tolerances` beside the test file (or
-    ``--mbh-tolerances``); ``mbh_tolerances.for_case(case)`` → the case's tolerances."""
+    ``--mbh-tolerances``); ``mbh_tolerances.for_case(case)`` → the case's tolerances.  Under
+    ``--mbh-record`` the file is recorded instead (the module notes)."""
     from mbh._harness.testing.tolerances import Tolerances
 
     chosen = request.config.getoption("--mbh-tolerances")
     path = Path(chosen) if chosen else Path(request.path).parent / TOLERANCE_FILE
+    recording = request.config.stash.get(_RECORDING, None)
+    if recording is not None:
+        return _RecordingTolerances(path.resolve(), recording,
+                                    request.getfixturevalue("mbh_runner"), request.node)
     if path not in _mbh_tolerance_files:
         _mbh_tolerance_files[path] = Tolerances(path)
     return _mbh_tolerance_files[path]

@@ -290,6 +290,11 @@ def assert_within_tolerance(result: SessionCase, tolerance: CaseTolerance) -> No
         assert_energy_error_below(result, tolerance.energy_error)
 
 
+def _same_step(step: float, dt: float) -> bool:
+    """Whether a per-step table's ``step`` is the case's ``dt`` (s), to round-off."""
+    return math.isclose(step, dt, rel_tol=1e-9)
+
+
 class Tolerances:
     """A tolerance file (format in the module docstring), validated on load.
 
@@ -385,21 +390,33 @@ class Tolerances:
         Raises
         ------
         ToleranceError
-            When no entry matches the case.
+            When no entry matches the case, or every entry that matches holds per-step tables
+            only (a recorded file: ``pytest --mbh-record``) and none for the case's step.
         """
         matched = [key for key in self._candidates(spec) if key in self.entries]
         if not matched:
             raise ToleranceError(f"{self.path}: no tolerance entry matches "
                                  f"{spec.scenario}.{spec.adapter}.{spec.method} (entries: "
                                  f"{', '.join('.'.join(k) for k in self.entries) or 'none'})")
+        if not any(self._applies(self.entries[key], spec.dt) for key in matched):
+            steps = sorted({step for key in matched for step in self.entries[key]["dt"]})
+            raise ToleranceError(f"{self.path}: no tolerance for {spec.scenario}.{spec.adapter}."
+                                 f"{spec.method} at dt {step_text(spec.dt)} s: its entries hold "
+                                 f"the steps {', '.join(map(step_text, steps))} s only")
         merged = CaseTolerance()
         for key in matched:
             entry = self.entries[key]
             merged = self._merge(merged, entry)
             for step, override in entry.get("dt", {}).items():
-                if math.isclose(step, spec.dt, rel_tol=1e-9):
+                if _same_step(step, spec.dt):
                     merged = self._merge(merged, override)
         return replace(merged, source=f"{self.path}: " + ", ".join(".".join(k) for k in matched))
+
+    @staticmethod
+    def _applies(entry: dict, dt: float) -> bool:
+        """Whether ``entry`` holds a tolerance for a case of step ``dt`` (s): it has keys of its
+        own, or a per-step table of that step."""
+        return set(entry) != {"dt"} or any(_same_step(step, dt) for step in entry["dt"])
 
     @staticmethod
     def _merge(tolerance: CaseTolerance, entry: dict) -> CaseTolerance:

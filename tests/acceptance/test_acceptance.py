@@ -1,8 +1,8 @@
 """The project's acceptance tests, written as a user of the pytest plugin writes them.
 
 Only the documented API is used: the ``mbh_runner`` and ``mbh_tolerances`` fixtures,
-``campaign_params`` and the assertion helpers of ``mbh._harness.testing.tolerances``.  The cases are the
-acceptance campaign beside this file (every engine's ``best`` on the four verified scenes, every
+``campaign_params`` and the assertion helpers of ``mbh.testing``.  The cases are the acceptance
+campaign beside this file (every engine's ``best`` on the four verified scenes, every
 ``default`` on the planar four-bar and slider-crank with its known failure); the tolerances, each
 with its measured value and margin, are in ``tolerances.toml`` beside this file.  About 10 s.
 """
@@ -13,9 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from mbh._harness.testing.plugin import campaign_params
-from mbh._harness.testing.cases import case_spec
-from mbh._harness.testing.tolerances import assert_convergence_order, assert_within_tolerance
+from mbh.testing import (assert_convergence_order, assert_within_tolerance, campaign_params,
+                         case_spec)
 
 CAMPAIGN = Path(__file__).with_name("acceptance.toml")
 

@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from mbh._harness.run.case import CaseResult
-from mbh._harness.testing.cases import CaseRunner, SessionCase, ToleranceError, case_label, case_spec
-from mbh._harness.testing.tolerances import (Tolerances, assert_at_least_as_fast, assert_convergence_order,
-                                constraint_violation_series)
+from mbh._harness.testing.cases import (CaseRunner, SessionCase, ToleranceError, case_label,
+                                        case_spec)
+from mbh._harness.testing.tolerances import (Tolerances, assert_at_least_as_fast,
+                                             assert_convergence_order, constraint_violation_series)
 from mbh._harness.model.trajectory import Trajectory
 from tests.helpers import example_suite_files
 
@@ -59,7 +60,7 @@ def test_selection_options_skip_other_cases_with_the_reason(tmp_path):
 
 
 USER_TESTS = '''
-from mbh._harness.testing.tolerances import assert_close_to_reference, assert_constraint_violation_below
+from mbh.testing import assert_close_to_reference, assert_constraint_violation_below
 
 
 def test_sensible_tolerance(mbh_runner):
