@@ -54,8 +54,8 @@ class CaseResult:
         (:func:`mbh._harness.store.runs.load_run`) less those the store adds (``run_id``,
         ``trajectory_file``, ``reused_from``); raises ValueError for a result without a row."""
         if self.row is None:
-            raise ValueError("this result has no row: run it with mbh._harness.run.row.run_one or "
-                             "in a campaign")
+            raise ValueError("this result has no row: mbh.run_case and campaigns give results "
+                             "with rows")
         # Imported here: a case's process (forked from the warm template, or a fresh interpreter)
         # never needs pandas and pyarrow, whose import added 0.37 s to the template's start.
         from mbh._harness.store.rows import case_frame
