@@ -16,7 +16,8 @@ def blocks() -> list[str]:
 
 def test_the_page_has_examples_for_every_task():
     text = "\n".join(blocks())
-    for call in ("mbh.run_case(", "mbh.MechanismBuilder(", "mbh.run_campaign(", "mbh.load_run("):
+    for call in ("mbh.run_case(", "mbh.MechanismBuilder(", "mbh.run_campaign(", "mbh.load_run(",
+                 "from mbh.adapters import", "from mbh.testing import"):
         assert call in text, call
 
 
