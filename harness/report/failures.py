@@ -31,8 +31,8 @@ import pandas as pd
 from matplotlib.lines import Line2D
 
 from mbh._harness.model import scenario as scenarios
-from mbh._harness.neutral.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED, Conditioning,
-                                  conditioning, nearest_passage)
+from mbh._harness.neutral.conditioning import (SINGULAR_DROP, SINGULAR_WINDOW_S, STOPPED,
+                                               Conditioning, conditioning, nearest_passage)
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.store.reference_files import stored_reference
 from mbh._harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure, apply_style,
