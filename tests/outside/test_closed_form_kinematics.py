@@ -5,26 +5,30 @@ the harness marks ``ok`` must keep it.  The angles and positions are read from t
 (:mod:`tests.outside.independent`), the link lengths and twists typed from the mechanism's
 description, never taken from the harness's reference or outputs.
 
-* Bennett's 4R linkage (Bennett 1903, "A new mechanism", Engineering 76, 777–778; in the
-  half-angle form of Chen & You 2005, Proc. R. Soc. A 461, 1229–1245, eq. 2.2–2.3): links of
-  lengths a, b, a, b with twists α, β, α, β and a / sin α = b / sin β have θ₁ + θ₃ = θ₂ + θ₄ = 0
-  (mod 2π) and tan(θ₁/2) tan(θ₂/2) = sin((β + α)/2) / sin((β − α)/2).  θₖ is the
-  Denavit–Hartenberg joint angle: the right-handed turn about joint k's axis from the common
-  normal of the link before it to that of the link after it (each link's normal runs from its
-  first joint to its second); α is the twist of the link of length a that follows joint 1.  The
-  sign convention is the one for which the drawing of :func:`tests.helpers.bennett_linkage`
-  closes (it asserts the loop closes to 1e-12 m); the relation is checked here as the bounded
-  residual sin(θ₁/2) sin(θ₂/2) sin((β − α)/2) − cos(θ₁/2) cos(θ₂/2) sin((β + α)/2).
+* Bennett's 4R linkage (Bennett 1903, "A new mechanism", Engineering 76, 777–778; the
+  half-angle form as written e.g. by Chen & You 2005, Proc. R. Soc. A 461, "Mobile assemblies
+  based on the Bennett linkage"): links of lengths a, b, a, b with twists α, β, α, β and
+  a / sin α = b / sin β have θ₁ + θ₃ = θ₂ + θ₄ = 0 (mod 2π) and
+  tan(θ₁/2) tan(θ₂/2) = sin((β + α)/2) / sin((β − α)/2).  θₖ is the Denavit–Hartenberg joint
+  angle: the right-handed turn about joint k's axis from the common normal of the link before
+  it to that of the link after it (each link's normal runs from its first joint to its second);
+  α is the twist of the link of length a that follows joint 1.  Statements of the relation
+  differ in sign conventions, so the one used is checked, not trusted: the drawing of
+  :func:`tests.helpers.bennett_linkage` closes with it (the helper asserts the loop closes to
+  1e-12 m), and the engines' runs keep it along a motion.  The relation is checked as the
+  bounded residual sin(θ₁/2) sin(θ₂/2) sin((β − α)/2) − cos(θ₁/2) cos(θ₂/2) sin((β + α)/2).
 * Freudenstein's equation of the planar four-bar (Freudenstein 1955, "Approximate synthesis of
   four-bar linkages", Trans. ASME 77, 853–861): with crank a, coupler b, rocker c and frame d,
   K₁ cos φ − K₂ cos ψ + K₃ = cos(φ − ψ), K₁ = d/c, K₂ = d/a, K₃ = (a² − b² + c² + d²)/(2ac).
   Written out from |C − B|² = b² (B = a(cos φ, sin φ), C = (d + c cos ψ, c sin ψ) with the angles
   from the frame line directed crank pivot → rocker pivot) the closure reads
   (d/a) cos ψ − (d/c) cos φ + K₃ = cos(φ − ψ), the form of Norton's Design of Machinery
-  (K₁ cos θ₄ − K₂ cos θ₂ + K₃ = cos(θ₂ − θ₄), K₁ = d/a, K₂ = d/c); Freudenstein's signs hold
-  for both angles measured from the opposite direction (φ + π, ψ + π), which is how the test
-  writes it.  Rouvinen's four-bar (``fourbar``): a = 2, b = 4, c = 4, d = 2.5 m (Rouvinen 2003,
-  §6.1, as fixed in the scene's notes).
+  (K₁ cos θ₄ − K₂ cos θ₂ + K₃ = cos(θ₂ − θ₄), K₁ = d/a, K₂ = d/c); the form above, with
+  K₁ = d/c and K₂ = d/a, holds for both angles measured from the opposite direction (φ + π,
+  ψ + π), which is how the test writes it (the signs of the cosine terms depend on the direction
+  the angles are measured from, which statements of the equation differ on).  Rouvinen's
+  four-bar (``fourbar``): a = 2, b = 4, c = 4, d = 2.5 m (Rouvinen 2003, §6.1, as fixed in the
+  scene's notes).
 * The slider-crank's exact slider position (e.g. Uicker, Pennock & Shigley, Theory of Machines
   and Mechanisms, the offset slider-crank's loop equation): a crank r from O at angle θ, a rod l
   to a slider on the line y = e, x = r cos θ + √(l² − (r sin θ − e)²).  ``slider_crank_planar``:
