@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.commands import exits
 from mbh._harness.commands.options import positive_int, positive_number, shared
 from mbh._harness.commands.output import print_fields, print_json
@@ -70,7 +71,8 @@ def simulate(args) -> int:
     case = run_case(adapter, mech, args.method, args.dt, t_end, reference, args.bounds)
     error = case.metrics.get("output_errors", {}).get(main_output(mech), float("nan"))
     accuracy = DEFAULT_ACCURACY if args.accuracy is None else args.accuracy
-    accurate = None if reference is None else bool(case.status == "ok" and error <= accuracy)
+    accurate = None if reference is None else bool(case.status == CaseStatus.OK
+                                                   and error <= accuracy)
     result = {"scenario": mech.name, "adapter": adapter.name, "version": adapter.version(),
               "method": args.method, "dt": args.dt, "t_end": t_end, **case.metrics,
               "accurate": accurate}
@@ -78,7 +80,7 @@ def simulate(args) -> int:
         print_json(result)
     else:
         print_fields(result, 28)
-    passed = case.status == "ok" and (args.accuracy is None or accurate is not False)
+    passed = case.status == CaseStatus.OK and (args.accuracy is None or accurate is not False)
     return exits.OK if passed else exits.NOT_PASSED
 
 

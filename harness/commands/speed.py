@@ -6,6 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.commands import exits
 from mbh._harness.commands.options import positive_int, shared
 from mbh._harness.commands.output import print_json, print_table, status_counts
@@ -122,7 +123,7 @@ def _scaling(figures, members: tuple[int, ...]) -> None:
     table = {}
     for row in rows:
         table.setdefault(row["adapter"], {"adapter": row["adapter"]})[f"N={row['N']}"] = \
-            format_number(row["s_per_sim_s"]) if row["status"] == "ok" else row["status"]
+            format_number(row["s_per_sim_s"]) if row["status"] == CaseStatus.OK else row["status"]
     for name, row in table.items():
         row["exponent (N>=4)"] = format_number(exponents[name])
     print_table(list(table.values()), ["adapter", *(f"N={n}" for n in members),

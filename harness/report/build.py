@@ -25,6 +25,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.model import scenario as scenarios
 from mbh._harness.store.reference_files import stored_reference
 from mbh._harness.report import failures, figures, mechanism, seed_compare, summary
@@ -214,7 +215,7 @@ def _history_cases(cases: pd.DataFrame, accuracy: float) -> list[tuple[str, pd.S
     hits = summary.reaching(cases, accuracy)
     if len(hits):
         chosen.append((f"fastest case within {accuracy:g}", hits.iloc[0]))
-    failing = cases[(cases["status"] != "ok") & cases["trajectory_file"].notna()]
+    failing = cases[(cases["status"] != CaseStatus.OK) & cases["trajectory_file"].notna()]
     if len(failing):
         longest = failing.iloc[int(np.argmax(failing["failure_time"].astype(float)
                                              .fillna(-np.inf).to_numpy()))]
@@ -235,7 +236,7 @@ def _drawable(row, trajectory, report: Report) -> bool:
 
 def _overlay_cases(cases: pd.DataFrame) -> list[pd.Series]:
     """Per adapter, its most accurate ``ok`` case (the engines to overlay on a drawing)."""
-    ok = cases[cases["status"] == "ok"].copy()
+    ok = cases[cases["status"] == CaseStatus.OK].copy()
     ok["_error"] = ok["main_output_error"].astype(float)
     best = ok.sort_values(["_error", "wall_time_s", "case_id"], kind="stable")
     return [group.iloc[0] for _, group in best.groupby("adapter", sort=True)]

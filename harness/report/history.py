@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from mbh._harness.model.status import FINISHED_RUN_STATUSES, CaseStatus
 from mbh._harness.common.errors import MbhError
 from mbh._harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
 from mbh._harness.store.manifest import list_runs
@@ -45,8 +46,6 @@ QUANTITIES: dict[str, tuple[str, str, SeriesRule]] = {
 }
 #: Name of the status "quantity" in :func:`find_changes`.
 STATUS = "status"
-#: Statuses of the runs a history reads.
-FINISHED = ("complete", "interrupted")
 #: Columns of the case rows a history keeps (besides the calibrated time it adds).
 _CASE_COLUMNS = ["case_id", "scenario", "adapter", "method", "dt", "status", "adapter_version",
                  "main_output_error", "max_constraint_violation", "max_energy_error_rel",
@@ -102,7 +101,7 @@ def load_history(campaign: str | None = None, root: Path | None = None) -> Histo
         When the root holds no finished run (of that campaign), naming the root and the
         campaigns it holds.
     """
-    manifests = [m for m in list_runs(root) if m["status"] in FINISHED]
+    manifests = [m for m in list_runs(root) if m["status"] in FINISHED_RUN_STATUSES]
     if campaign is None and manifests:
         campaign = manifests[-1]["campaign"]
     mine = [m for m in manifests if m["campaign"] == campaign]
@@ -162,7 +161,7 @@ def _status_changes(case: pd.DataFrame) -> list[dict]:
     """Every ok ↔ not-ok flip of one case's status (runs where it is stored)."""
     statuses = case["status"].tolist()
     runs = case["run"].tolist()
-    ok = np.array([s == "ok" for s in statuses])
+    ok = np.array([s == CaseStatus.OK for s in statuses])
     changes = []
     for position in np.flatnonzero(ok[1:] != ok[:-1]) + 1:
         regression = not ok[position]
@@ -175,7 +174,7 @@ def _status_changes(case: pd.DataFrame) -> list[dict]:
 
 def _quantity_changes(case: pd.DataFrame, column: str, rule: SeriesRule) -> list[dict]:
     """The steps of one quantity of one case over the runs where it ended ``ok``."""
-    ok = case[(case["status"] == "ok") & np.isfinite(case[column]) & (case[column] >= 0)]
+    ok = case[(case["status"] == CaseStatus.OK) & np.isfinite(case[column]) & (case[column] >= 0)]
     values, runs = ok[column].to_numpy(float), ok["run"].to_numpy(int)
     steps = detect_steps(values, rule)
     latest = steps[-1].after if steps else None

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullLocator
 
+from mbh._harness.model.status import CaseStatus
 from mbh._harness.report.history import QUANTITIES, STATUS
 from mbh._harness.report.style import Figure, new_figure, plain, render, series_style
 
@@ -60,7 +61,7 @@ def _legend_entry(text: str) -> str:
 def _relative(case: pd.DataFrame, column: str, runs: int) -> np.ndarray:
     """The case's ``column`` over its median of ``ok`` runs, shape (runs,), NaN where not ok."""
     values = np.full(runs, np.nan)
-    ok = case[(case["status"] == "ok") & (case[column] > 0)]
+    ok = case[(case["status"] == CaseStatus.OK) & (case[column] > 0)]
     if len(ok):
         values[ok["run"].to_numpy(int)] = ok[column].to_numpy(float) / np.median(ok[column])
     return values
@@ -112,7 +113,8 @@ def _draw_quantities(axes, cases: pd.DataFrame, changes: pd.DataFrame, columns: 
 
 def _draw_status(axes, cases: pd.DataFrame, changes: pd.DataFrame, runs: int) -> None:
     """The last panel: cases ``ok`` per run, status changes marked."""
-    counts = cases.assign(ok=cases["status"] == "ok").groupby("run")["ok"].agg(["sum", "size"])
+    ok = cases.assign(ok=cases["status"] == CaseStatus.OK)
+    counts = ok.groupby("run")["ok"].agg(["sum", "size"])
     counts = counts.reindex(range(runs))
     axes.step(np.arange(runs), counts["sum"], where="mid", color="#0072B2", label="cases ok")
     axes.step(np.arange(runs), counts["size"], where="mid", color=_BAND, label="cases stored")
