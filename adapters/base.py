@@ -11,7 +11,7 @@ One run loop
 the times with one rule (:func:`check_run_times`), asks the adapter for an engine-specific
 :class:`Stepper` (``Adapter._start``), steps it through every sample time and on to ``t_end``,
 checks every state it reads (:func:`divergence_reason`) and turns every way a run can end into a
-status (:class:`~mbh._harness.model.status.CaseStatus`):
+status (:class:`~mbh._harness.common.status.CaseStatus`):
 
 * ``ok``: every state read was finite and within :data:`DIVERGENCE_LIMIT`;
 * ``diverged``: a state read was non-finite or beyond the limit, or the engine's own divergence
@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 #: A body whose position (m), velocity (m/s) or angular velocity (rad/s) exceeds this in norm has
@@ -93,7 +93,7 @@ class RunFailure(Exception):
     Parameters
     ----------
     status : {"failed", "diverged"}
-        The run's :class:`~mbh._harness.model.status.CaseStatus` (a member or its string, such
+        The run's :class:`~mbh._harness.common.status.CaseStatus` (a member or its string, such
         as an in-house integrator's state once it stopped).
     reason : str
         What happened, for the trajectory's ``reason``.

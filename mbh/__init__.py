@@ -12,8 +12,8 @@ Examples
 >>> import mbh
 >>> fourbar = mbh.load_scenario("fourbar")
 >>> result = mbh.run_case(fourbar, "mujoco", "best", dt=1e-3, t_end=0.1)
->>> result.status
-'ok'
+>>> print(result.status)
+ok
 >>> frame = result.to_frame()              # one row, the columns of a stored run
 >>> frame.loc[0, "adapter"]
 'mujoco'

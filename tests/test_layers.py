@@ -55,7 +55,7 @@ _RANK = {name: rank for rank, (name, _, _) in enumerate(LAYERS)}
 HARNESS_MAY_IMPORT = {"mbh._adapters", "mbh._adapters.base"}
 ADAPTERS_MAY_IMPORT = {"mbh._harness.common", "mbh._harness.model.mechanism",
                        "mbh._harness.model.trajectory", "mbh._harness.model.topology",
-                       "mbh._harness.model.status", "mbh._harness.neutral.start"}
+                       "mbh._harness.neutral.start"}
 #: The import package each repository folder is mapped to (pyproject.toml's package-dir).
 MAPPED = {"harness": "mbh._harness", "adapters": "mbh._adapters", "mbh": "mbh"}
 
@@ -254,7 +254,7 @@ def test_the_checker_sees_every_kind_of_violation():
     assert violation("mbh._harness.cli", "mbh._adapters.base.UnsupportedCase") is None
     assert violation("mbh._adapters.pinocchio_adapter.adapter",
                      "mbh._adapters.integrators.IntegratorState") is None
-    assert violation("mbh._adapters.base", "mbh._harness.model.status.CaseStatus") is None
+    assert violation("mbh._adapters.base", "mbh._harness.common.status.CaseStatus") is None
     assert violation("mbh._adapters.mujoco_adapter.build", "mbh._harness.model.mechanism.Mechanism") is None
     assert violation("mbh._adapters.pinocchio_adapter.adapter", "mbh._adapters.pinocchio_adapter.build") \
         is None

@@ -26,7 +26,7 @@ from mbh._adapters.exudyn_adapter.methods import (
 )
 from mbh._adapters.exudyn_adapter.system import ExudynSystem
 from mbh._harness.model.mechanism import PLANAR_JOINT_TYPES, Mechanism
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 

@@ -43,7 +43,7 @@ from mbh._harness.model.mechanism import (
     Mechanism,
     SpringDamper,
 )
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 _SENSED = ("Position", "RotationMatrix", "Velocity", "AngularVelocity")

@@ -36,7 +36,7 @@ from mbh._adapters.integrators.multistep import (
 )
 from mbh._adapters.integrators.nystrom import RK4, RK5, RK8, RKN4, Euler, Heun, SymplecticEuler
 from mbh._adapters.integrators.scipy_solvers import SCIPY_METHODS
-from mbh._harness.model.status import IntegratorState
+from mbh._harness.common.status import IntegratorState
 
 __all__ = [
     "INTEGRATORS", "Integrator", "IntegratorState", "SecondOrderProblem",

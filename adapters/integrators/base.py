@@ -45,7 +45,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from mbh._harness.model.status import IntegratorState
+from mbh._harness.common.status import IntegratorState
 
 
 @runtime_checkable

@@ -51,7 +51,7 @@ import numpy as np
 from scipy.integrate import DOP853, RK45
 
 from mbh._adapters.integrators.base import Integrator
-from mbh._harness.model.status import IntegratorState
+from mbh._harness.common.status import IntegratorState
 
 
 @dataclass(frozen=True)

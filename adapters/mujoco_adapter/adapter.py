@@ -19,7 +19,7 @@ from mbh._adapters.mujoco_adapter.state import _start as _set_start
 from mbh._adapters.mujoco_adapter.stepping import Stepping
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import BodyStates
 
 

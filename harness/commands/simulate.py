@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import sys
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.commands import exits
 from mbh._harness.commands.options import positive_int, positive_number, shared
 from mbh._harness.commands.output import print_fields, print_json

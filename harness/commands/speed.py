@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.commands import exits
 from mbh._harness.commands.options import positive_int, shared
 from mbh._harness.commands.output import print_json, print_table, status_counts

@@ -14,6 +14,8 @@ from collections import Counter
 
 from tqdm import tqdm
 
+from mbh._harness.common.status import CaseStatus
+
 
 def progress_wanted(requested: bool) -> bool:
     """Whether to draw the bar: asked for, and stderr is a terminal."""
@@ -39,7 +41,7 @@ class CaseProgress:
     def update(self, row: dict) -> None:
         """Count one finished case (its row's ``status``)."""
         status = row.get("status", "")
-        if status != "ok":
+        if status != CaseStatus.OK:
             self._failures[status] += 1
             self._bar.set_postfix_str(
                 "failures " + ", ".join(f"{k}={v}" for k, v in sorted(self._failures.items())),

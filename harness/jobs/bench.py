@@ -32,7 +32,7 @@ import numpy as np
 from mbh._adapters import adapter_names, get_adapter
 from mbh._adapters.base import UnsupportedCase
 from mbh._harness.model import scenario
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.timegrid import sample_times
 
 #: Scenarios of the overhead and fallback measurements: every shipped scene.

@@ -54,7 +54,7 @@ from mbh._harness.run.row import CaseWork
 from mbh._harness.report.history import (QUANTITIES, STATUS, find_changes, load_history,
                                     open_regressions)
 from mbh._harness.store.compare import comparable_calibrations, compare_runs
-from mbh._harness.model.status import RunStatus
+from mbh._harness.common.status import RunStatus
 from mbh._harness.store.manifest import latest_run, list_runs
 from mbh._harness.store.runs import RunStore
 from mbh._harness.common.numbers import format_number

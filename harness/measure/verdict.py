@@ -59,7 +59,7 @@ from mbh._harness.measure.energy import energy_balance, energy_scale, has_quadra
 from mbh._harness.measure.metrics import reference_outputs, violation_series
 from mbh._harness.model.mechanism import Mechanism, characteristic_length
 from mbh._harness.model.outputs import rotation_between
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.timegrid import TIME_MATCH, reference_indices
 from mbh._harness.model.trajectory import Trajectory
 

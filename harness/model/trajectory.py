@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 
 #: Every case status, in the order reports list them (:class:`CaseStatus` says what each means).
 STATUSES = tuple(CaseStatus)

@@ -47,6 +47,7 @@ with the time left; where neither bar nor lines are shown, no pilot runs.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import time
@@ -57,7 +58,7 @@ from mbh._harness.references.routes import (ROUTE_TOLERANCE, BranchRouteError, f
                                             reduced_route)
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.outputs import output_series
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.timegrid import GRID_STEP
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.common.errors import MbhError
@@ -81,7 +82,21 @@ DAE_CHECK = ("ida:rtol=1e-13,atol=1e-13,max_steps=5000000", GRID_STEP)
 #: of γ times θ̇² (figures: docs/measurements.md, section "References").
 BRANCH_ROUTE_A = ("branch-full:dop853", ROUTE_TOLERANCE)
 BRANCH_ROUTE_B = ("branch-reduced:dop853", ROUTE_TOLERANCE)
-_BRANCH_ROUTES = {BRANCH_ROUTE_A[0]: full_route, BRANCH_ROUTE_B[0]: reduced_route}
+#: The route that uses no contestant's code, required of every scene whose routes A and B are the
+#: in-house ones: :func:`~mbh._harness.references.routes.full_route` on the scene's own joint
+#: equations (no branch rows), DOP853 on the harness's neutral Newton–Euler equations.  It must
+#: agree with route A within :data:`AGREEMENT_LIMIT` at every sample of the whole run.
+INDEPENDENT_ROUTE = ("neutral-full:dop853", ROUTE_TOLERANCE)
+
+
+def _neutral_full_route(mech: Mechanism, grid: np.ndarray) -> Trajectory:
+    """The full route on ``mech``'s own joint equations, whether or not the scene asks for the
+    neutral routes."""
+    return full_route(dataclasses.replace(mech, neutral_routes=True), grid)
+
+
+_NEUTRAL_ROUTES = {BRANCH_ROUTE_A[0]: full_route, BRANCH_ROUTE_B[0]: reduced_route,
+                   INDEPENDENT_ROUTE[0]: _neutral_full_route}
 
 
 class ReferenceBuildError(MbhError, RuntimeError):
@@ -115,15 +130,22 @@ def routes(mech: Mechanism) -> tuple[tuple[str, float], tuple[str, float]]:
     return (BRANCH_ROUTE_A, BRANCH_ROUTE_B) if mech.neutral_routes else (ROUTE_A, ROUTE_B)
 
 
+def independent_route(mech: Mechanism) -> tuple[str, float]:
+    """The route of ``mech``'s reference that uses no contestant's code: route A itself on the
+    neutral routes (checked against route B), else :data:`INDEPENDENT_ROUTE` (checked against
+    route A)."""
+    return BRANCH_ROUTE_A if mech.neutral_routes else INDEPENDENT_ROUTE
+
+
 def _run_route(mech: Mechanism, route: tuple[str, float], grid: np.ndarray,
                t_end: float | None = None) -> Trajectory:
     """``route`` sampled on ``grid`` up to ``t_end`` (s; the scene's duration unless given)."""
     from mbh._adapters import get_adapter
 
     method, step = route
-    if method in _BRANCH_ROUTES:
+    if method in _NEUTRAL_ROUTES:
         try:
-            return _BRANCH_ROUTES[method](mech, grid)
+            return _NEUTRAL_ROUTES[method](mech, grid)
         except BranchRouteError as error:
             raise ReferenceBuildError(f"{mech.name}: reference route {method}: {error}") from error
     t_end = mech.duration if t_end is None else t_end
@@ -165,26 +187,54 @@ def _dae_check(mech: Mechanism, route_a: Trajectory, grid: np.ndarray) -> dict:
             "cost": _cost(dae)}
 
 
+def _independent_check(mech: Mechanism, route_a: Trajectory, agreement: dict, grid: np.ndarray,
+                       stage) -> dict:
+    """The agreement of :func:`independent_route` with the other route of ``mech``'s reference;
+    ``stage(name, work)`` runs the independent route when it is not route A.  Raises
+    ReferenceBuildError above :data:`AGREEMENT_LIMIT`."""
+    route = independent_route(mech)
+    compared = {"route": list(route), "span_s": float(grid[-1]), "samples": int(grid.size),
+                "grid_step": GRID_STEP, "limit": AGREEMENT_LIMIT}
+    if mech.neutral_routes:  # route A is the independent route; its agreement is checked above
+        return {**compared, "compared_with": "route B", "difference": agreement}
+    run = stage(f"independent route {route[0]}", lambda: _run_route(mech, route, grid))
+    difference = route_difference(mech, route_a, run)
+    if not difference["max"] <= AGREEMENT_LIMIT:
+        raise ReferenceBuildError(
+            f"{mech.name}: route A (in-house) and the independent route {route[0]} (the "
+            f"harness's neutral equations, no contestant's code) disagree by "
+            f"{difference['max']:.3g} > {AGREEMENT_LIMIT:g}: a modelling error in one of the "
+            f"two formulations ({json.dumps(difference)})")
+    return {**compared, "compared_with": "route A", "difference": difference,
+            "cost": _cost(run)}
+
+
 def build_reference(mech: Mechanism, show_progress: bool | None = None) -> tuple[Trajectory, dict]:
-    """Compute both routes, their agreement and the DAE check (no cache); raises ReferenceBuildError
-    when the routes differ by more than :data:`AGREEMENT_LIMIT`.  ``show_progress``: draw the
-    progress bar (None: when stderr is a terminal)."""
+    """Compute both routes, their agreement, the independent route's agreement and the DAE check
+    (no cache); raises ReferenceBuildError when the routes differ by more than
+    :data:`AGREEMENT_LIMIT`, route A violates the joint equations by more, or the independent
+    route differs by more.  ``show_progress``: draw the progress bar (None: when stderr is a
+    terminal)."""
     grid = reference_grid(mech)
     first, second = routes(mech)
-    stages = [first, second] + ([] if mech.branch else [DAE_CHECK])
+    stages = ([first, second] + ([] if mech.neutral_routes else [INDEPENDENT_ROUTE])
+              + ([] if mech.branch else [DAE_CHECK]))
     shown = progress_wanted(True) if show_progress is None else show_progress
     said = shown or waits.LOG.isEnabledFor(logging.INFO)
     estimates = [_estimate(mech, route, grid) for route in stages] if said else [0.0] * len(stages)
     with StageProgress(f"reference {mech.name}", estimates, shown) as bar:
-        def stage(index: int, name: str, work):
+        order = iter(range(len(stages)))
+
+        def stage(name: str, work):
+            index = next(order)
             left = sum(estimates[index:])
             waits.LOG.info("reference of %s: stage %d of %d, %s%s", mech.name, index + 1,
                            len(stages), name,
                            f" (~{waits.duration(left)} left)" if left > 0 else "")
             return bar.run(index, name, work)
 
-        route_a = stage(0, f"route A {first[0]}", lambda: _run_route(mech, first, grid))
-        route_b = stage(1, f"route B {second[0]}", lambda: _run_route(mech, second, grid))
+        route_a = stage(f"route A {first[0]}", lambda: _run_route(mech, first, grid))
+        route_b = stage(f"route B {second[0]}", lambda: _run_route(mech, second, grid))
         agreement = route_difference(mech, route_a, route_b)
         if agreement["max"] > AGREEMENT_LIMIT:
             raise ReferenceBuildError(f"{mech.name}: reference routes disagree by "
@@ -194,11 +244,13 @@ def build_reference(mech: Mechanism, show_progress: bool | None = None) -> tuple
         if not joints <= AGREEMENT_LIMIT:
             raise ReferenceBuildError(f"{mech.name}: route A violates the joint equations by "
                                       f"{joints:.3g} m > {AGREEMENT_LIMIT:g}")
-        dae = (stage(2, "DAE check", lambda: _dae_check(mech, route_a, grid))
+        independent = _independent_check(mech, route_a, agreement, grid, stage)
+        dae = (stage("DAE check", lambda: _dae_check(mech, route_a, grid))
                if not mech.branch else None)
     info = {"scenario": mech.name, "content_hash": mech.content_hash,
             "version": REFERENCE_VERSION, "route_a": list(first), "route_b": list(second),
             "grid_step": GRID_STEP, "agreement": agreement, "max_constraint_violation": joints,
+            "independent": independent,
             "route_a_cost": _cost(route_a), "route_b_cost": _cost(route_b),
             "dae_check": (dae if not mech.branch else
                           {"method": DAE_CHECK[0], "status": "skipped",
@@ -258,7 +310,7 @@ def _refusal_key(mech: Mechanism) -> dict:
     return {"scenario": mech.name, "content_hash": mech.content_hash,
             "version": REFERENCE_VERSION, "grid_step": GRID_STEP,
             "route_a": list(routes(mech)[0]), "route_b": list(routes(mech)[1]),
-            "agreement_limit": AGREEMENT_LIMIT}
+            "independent_route": list(independent_route(mech)), "agreement_limit": AGREEMENT_LIMIT}
 
 
 def _record_refusal(mech: Mechanism, error: ReferenceBuildError) -> None:

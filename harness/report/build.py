@@ -25,7 +25,7 @@ import jinja2
 import numpy as np
 import pandas as pd
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model import scenario as scenarios
 from mbh._harness.store.reference_files import stored_reference
 from mbh._harness.report import failures, figures, mechanism, seed_compare, summary

@@ -39,7 +39,7 @@ from mbh._harness.report.style import (OUTCOME_COLOURS, REFERENCE_COLOUR, Figure
                                   is_missing, new_figure, outcome, plain, render)
 from mbh._harness.report.summary import Table
 from mbh._harness.model.scenario import ScenarioError
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.common.numbers import as_float, float_or_nan
 
 #: Scenario tag that puts a scene into the section.

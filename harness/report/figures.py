@@ -27,7 +27,7 @@ from mbh._harness.neutral.mobility import independent_rows
 from mbh._harness.report.style import (OUTCOME_COLOURS, OUTCOME_LETTERS, REFERENCE_COLOUR, Figure,
                                   apply_style, new_figure, no_data, outcome, plain,
                                   render, series_style)
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.timegrid import reference_indices
 from mbh._harness.model.trajectory import Trajectory
 

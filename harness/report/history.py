@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from mbh._harness.model.status import FINISHED_RUN_STATUSES, CaseStatus
+from mbh._harness.common.status import FINISHED_RUN_STATUSES, CaseStatus
 from mbh._harness.common.errors import MbhError
 from mbh._harness.report.changepoints import ERROR, TIME, SeriesRule, detect_steps
 from mbh._harness.store.manifest import list_runs

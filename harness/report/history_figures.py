@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullLocator
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.report.history import QUANTITIES, STATUS
 from mbh._harness.report.style import Figure, new_figure, plain, render, series_style
 

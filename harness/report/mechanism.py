@@ -28,7 +28,7 @@ from mbh._harness.model.mechanism import GROUND, Mechanism, characteristic_lengt
 from mbh._harness.model.outputs import body_rotations
 from mbh._harness.report.style import (PALETTE, REFERENCE_COLOUR, Figure, apply_style, new_figure,
                                   no_data, plain, render)
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 
 #: The key of ``trajectories`` drawn in grey as the reference.

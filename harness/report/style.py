@@ -28,7 +28,7 @@ import matplotlib
 from matplotlib.figure import Figure as MplFigure
 
 from mbh._harness.common.numbers import is_missing
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 
 #: Okabe–Ito colours for lines, in the order series take them (yellow left out: too light).
 PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#000000")

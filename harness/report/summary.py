@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 
 #: Accuracy levels of the summary, rad or m on the main output (every decade 1e-2 … 1e-10).
 ACCURACY_LEVELS = tuple(10.0 ** -k for k in range(2, 11))

@@ -18,7 +18,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from mbh._harness.common.machine_speed import machine_speed_s, workload_name
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.run.spec import CaseSpec
 
 #: The calibration case's identity for the executor (its row is not stored with the cases).

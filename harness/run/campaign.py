@@ -34,6 +34,7 @@ import signal
 import sys
 import threading
 
+from mbh._harness.common.status import RunStatus
 from mbh._harness.model import scenario
 from mbh._harness.common.environment import code_fingerprint
 from mbh._harness.run.calibration import (CALIBRATION, WithCalibration, calibration_work,
@@ -351,8 +352,9 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
                 on_result=on_result, progress=not quiet)
         if campaign.sweep is not None:
             _sweep(campaign, store, work, workers, backend, quiet)
-        store.finish("complete")  # a stop while it writes leaves the run interrupted, not running
+        # a stop while it writes leaves the run interrupted, not running
+        store.finish(RunStatus.COMPLETE)
     except KeyboardInterrupt as stop:
-        store.finish("interrupted")
+        store.finish(RunStatus.INTERRUPTED)
         raise CampaignInterrupted(store, getattr(stop, "signum", signal.SIGINT)) from None
     return store

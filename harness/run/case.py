@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from mbh._adapters.base import Adapter, UnsupportedCase, blame
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.common.capture import captured_output, engine_note
 from mbh._harness.neutral.conditioning import label_failure
 from mbh._harness.measure.metrics import case_metrics
@@ -40,8 +41,9 @@ class CaseResult:
     row: dict | None = None
 
     @property
-    def status(self) -> str:
-        """The verdict: ``ok``, ``failed``, ``diverged``, ``unsupported`` (docs/adapters.md)."""
+    def status(self) -> CaseStatus:
+        """The verdict (:class:`~mbh._harness.common.status.CaseStatus`, equal to its string:
+        ``ok``, ``failed``, ``diverged``, ``unsupported``; docs/adapters.md)."""
         return self.trajectory.status
 
     @property
@@ -77,10 +79,11 @@ def simulate_case(adapter: Adapter, mech: Mechanism, method: str, dt: float,
         try:
             trajectory = adapter.simulate(_built(adapter, mech), method, dt, t_end, times)
         except UnsupportedCase as error:
-            trajectory = Trajectory.empty(len(mech.bodies), status="unsupported", reason=str(error))
+            trajectory = Trajectory.empty(len(mech.bodies), status=CaseStatus.UNSUPPORTED,
+                                          reason=str(error))
         except _BuildBroke as error:
-            trajectory = Trajectory.empty(len(mech.bodies), status="failed", reason=str(error),
-                                          failure_time=0.0)
+            trajectory = Trajectory.empty(len(mech.bodies), status=CaseStatus.FAILED,
+                                          reason=str(error), failure_time=0.0)
     note = engine_note(printed.text)
     if note:
         trajectory.notes = [*trajectory.notes, note]

@@ -64,6 +64,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.common.progress import CaseProgress, progress_wanted
 
 #: Environment of every worker process: one thread per BLAS/OpenMP/numba pool, so timed cases
@@ -352,15 +353,16 @@ def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
         except subprocess.TimeoutExpired:
             worker.kill()
             worker.output()
-            return failure_row(spec, "timeout", f"no result within the case timeout of "
+            return failure_row(spec, CaseStatus.TIMEOUT, f"no result within the case timeout of "
                                                 f"{timeout_s:g} s; worker process killed"), None
         finally:
             workers.finished(worker)
         if returncode != 0 or not result_path.exists():
-            return failure_row(spec, "crashed", _exit_reason(returncode, worker.output())), None
+            reason = _exit_reason(returncode, worker.output())
+            return failure_row(spec, CaseStatus.CRASHED, reason), None
         kind, value = pickle.loads(result_path.read_bytes())
     if kind == "raised":
-        return failure_row(spec, "crashed", f"worker raised {value}"), None
+        return failure_row(spec, CaseStatus.CRASHED, f"worker raised {value}"), None
     return value
 
 
@@ -530,7 +532,8 @@ def _dask_case(execution: str, work: Callable, spec, timeout_s: float, failure_r
     try:
         return run_isolated(work, spec, timeout_s, failure_row, workers)
     except _Stopped:
-        return failure_row(spec, "crashed", "the campaign stopped before the case started"), None
+        return failure_row(spec, CaseStatus.CRASHED,
+                           "the campaign stopped before the case started"), None
 
 
 def _end_dask_execution(execution: str, stop: bool) -> None:
@@ -560,7 +563,8 @@ def _run_dask(specs, limits, work, scheduler, failure_row, finished) -> None:
                 try:
                     row, trajectory = future.result()
                 except KilledWorker as error:
-                    row, trajectory = failure_row(spec, "crashed", f"Dask worker died: {error}"), None
+                    row = failure_row(spec, CaseStatus.CRASHED, f"Dask worker died: {error}")
+                    trajectory = None
                 finished(spec, row, trajectory)
         except BaseException:
             client.cancel(list(futures))

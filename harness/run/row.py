@@ -30,6 +30,7 @@ import scipy
 
 from mbh._adapters import AdapterLoadError, resolve_adapter
 from mbh._adapters.base import Adapter, UnsupportedCase, blame, describe
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model import scenario
 from mbh._harness.run.spec import CaseSpec, main_output
 from mbh._harness.run.case import CaseResult, run_case, simulate_case
@@ -192,7 +193,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float, mech: Mechanism | 
         "scenario_hash": mech.content_hash, "adapter_version": version,
         **_metric_columns(metrics, mech),
         "accurate": None if reference is None else bool(
-            trajectory.status == "ok" and error <= accuracy),
+            trajectory.status == CaseStatus.OK and error <= accuracy),
         "main_output": main, "main_output_error": error,
         "wall_time_s": wall, "wall_time_per_sim_s": wall / spec.t_end,
         "wall_time_per_step_s": wall / trajectory.steps if trajectory.steps else float("nan"),
@@ -205,8 +206,8 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float, mech: Mechanism | 
 
 def _failed(spec: CaseSpec, mech: Mechanism, reason: str, reference_column: str) -> CaseResult:
     """A ``failed`` case without samples or metrics, its row saying ``reason``."""
-    row = error_row(spec, "failed", reason) | {"reference": reference_column}
-    return CaseResult(Trajectory.empty(len(mech.bodies), status="failed", reason=reason,
+    row = error_row(spec, CaseStatus.FAILED, reason) | {"reference": reference_column}
+    return CaseResult(Trajectory.empty(len(mech.bodies), status=CaseStatus.FAILED, reason=reason,
                                        failure_time=0.0), {}, row)
 
 

@@ -26,7 +26,7 @@ from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_complete
 from dataclasses import dataclass
 
 from mbh._harness.common import waits
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 
 #: (scene, method, dt s, t_end s, what it compiles) of each phase, longest first.
 PHASES = (

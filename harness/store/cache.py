@@ -12,7 +12,7 @@ import shutil
 import threading
 from pathlib import Path
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.store.files import write_table
 from mbh._harness.store.location import root_or_default

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from mbh._harness.model.status import CaseStatus
+from mbh._harness.common.status import CaseStatus
 
 #: Change classes of :func:`compare_runs`, in the order they are decided.
 CHANGES = ("newly failing", "newly passing", "less accurate", "more accurate", "slower",

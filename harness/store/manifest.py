@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 
 from mbh._harness.common.environment import git_state, machine, package_versions
-from mbh._harness.model.status import FINISHED_RUN_STATUSES, RunStatus
+from mbh._harness.common.status import FINISHED_RUN_STATUSES, RunStatus
 from mbh._harness.store.location import root_or_default
 from mbh._harness.store.problems import StoreError, StoreProblem
 from mbh._harness.store.schema import SCHEMA_VERSION, SchemaError, migrate_manifest

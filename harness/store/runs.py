@@ -59,7 +59,7 @@ import pandas as pd
 
 from mbh._harness.common.machine_speed import workload_name
 from mbh._harness.model import scenario
-from mbh._harness.model.status import FINISHED_RUN_STATUSES, RunStatus
+from mbh._harness.common.status import FINISHED_RUN_STATUSES, RunStatus
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.store.files import write_json, write_table
 from mbh._harness.store.location import check_writable, root_or_default
@@ -303,7 +303,7 @@ class RunStore:
 
     def finish(self, status: RunStatus) -> None:
         """Record the end time and ``status`` (one of
-        :data:`~mbh._harness.model.status.FINISHED_RUN_STATUSES`); write the one-file exports
+        :data:`~mbh._harness.common.status.FINISHED_RUN_STATUSES`); write the one-file exports
         ``cases.parquet`` and ``sweeps.parquet``."""
         if status not in FINISHED_RUN_STATUSES:
             raise ValueError(f"run status must be one of {', '.join(FINISHED_RUN_STATUSES)}, "

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.scenario import read_toml
 from mbh._harness.testing.cases import SessionCase, ToleranceError, step_text
 from mbh._harness.testing.tolerances import (ENTRY_KEYS, CaseTolerance, Tolerances,
@@ -56,7 +57,7 @@ def measured_errors(case: SessionCase) -> dict:
     case with samples ``outputs`` (name → max |y − y_ref|, when the scene has a reference),
     ``constraint_violation`` and ``energy_error`` (when the scene has an energy scale)."""
     measured: dict = {"status": case.status}
-    if case.status != "ok" or case.trajectory.n_samples == 0:
+    if case.status != CaseStatus.OK or case.trajectory.n_samples == 0:
         return measured
     if case.reference is not None:
         measured["outputs"] = {

@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.run.spec import CaseSpec, main_output
 from mbh._harness.testing.cases import ANY, SessionCase, ToleranceError, step_text
 from mbh._harness.measure.energy import energy_balance, energy_scale
@@ -77,7 +78,7 @@ def _no_samples(result: SessionCase) -> None:
                              f"({result.trajectory.reason})")
 
 
-def assert_status(result: SessionCase, expected: str = "ok") -> None:
+def assert_status(result: SessionCase, expected: str = CaseStatus.OK) -> None:
     """The case ended with status ``expected`` (:data:`mbh._harness.model.trajectory.STATUSES`)."""
     __tracebackhide__ = True
     if expected not in STATUSES:
@@ -269,7 +270,7 @@ class CaseTolerance:
         Where it came from (file and matched entries), for messages.
     """
 
-    status: str = "ok"
+    status: str = CaseStatus.OK
     outputs: dict = field(default_factory=dict)
     constraint_violation: float | None = None
     energy_error: float | None = None

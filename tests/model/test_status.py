@@ -1,4 +1,4 @@
-"""The status vocabularies (mbh._harness.model.status): members are their plain strings, so every
+"""The status vocabularies (mbh._harness.common.status): members are their plain strings, so every
 file the store writes keeps its bytes, and a string read back compares equal to its member."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 from mbh._adapters.base import RunFailure
 from mbh._harness.common import jsonout
-from mbh._harness.model.status import CaseStatus, IntegratorState, RunStatus
+from mbh._harness.common.status import CaseStatus, IntegratorState, RunStatus
 from mbh._harness.model.trajectory import STATUSES, Trajectory
 from mbh._harness.store.files import write_json
 from mbh._harness.store.rows import case_frame, row_table

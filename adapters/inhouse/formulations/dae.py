@@ -81,6 +81,7 @@ from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
 from mbh._adapters.inhouse.formulations.dynamics import solve_augmented
 from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.inhouse.numerics.rank import full_pivot_elimination
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.mechanism import Mechanism
 
 FORMS = ("ggl", "index3")
@@ -363,7 +364,7 @@ def simulate_ida(mech: Mechanism, q0, v0, t_end: float, sample_times, rtol: floa
     integration = IdaIntegration(model, q0, v0, t_end, rtol=rtol, atol=atol,
                                  max_steps=max_steps, jacobian=jacobian)
     taken: list[tuple[float, np.ndarray]] = []
-    status, reason, failure_time = "ok", None, None
+    status, reason, failure_time = CaseStatus.OK, None, None
     try:
         for t in (*samples, t_end):
             integration.advance_to(float(t))
@@ -372,7 +373,7 @@ def simulate_ida(mech: Mechanism, q0, v0, t_end: float, sample_times, rtol: floa
     except RunFailure as failure:
         status, reason, failure_time = failure.status, failure.reason, integration.t
     except (RuntimeError, FloatingPointError, ValueError, np.linalg.LinAlgError) as exc:
-        status, reason, failure_time = "failed", describe(exc), integration.t
+        status, reason, failure_time = CaseStatus.FAILED, describe(exc), integration.t
     n = model.n
     states = np.array([y for _, y in taken]).reshape(len(taken), -1)
     return IdaResult(np.array([t for t, _ in taken]), states[:, :n].reshape(-1, n),
@@ -435,18 +436,19 @@ class IdaIntegration:
             self._started = True
         while self.t < t:
             if self.steps >= self.max_steps:
-                raise RunFailure("failed", f"max_steps={self.max_steps} reached before "
+                raise RunFailure(CaseStatus.FAILED, f"max_steps={self.max_steps} reached before "
                                            f"t_end={self.t_end:g} s")
             out = self.solver.step(self.t_end, method="onestep", tstop=self.t_end)
             self.njev = int(out.njev)
             if not out.success:
-                raise RunFailure("failed", f"IDA flag {out.status}: {out.message}")
+                raise RunFailure(CaseStatus.FAILED, f"IDA flag {out.status}: {out.message}")
             self.steps += 1
             q, v, _, _ = self.model.split(out.y)
             if not (np.all(np.isfinite(q)) and np.all(np.isfinite(v))):
-                raise RunFailure("diverged", "non-finite state")
+                raise RunFailure(CaseStatus.DIVERGED, "non-finite state")
             if max(np.linalg.norm(q), np.linalg.norm(v)) > DIVERGENCE_LIMIT:
-                raise RunFailure("diverged", f"state norm exceeds {DIVERGENCE_LIMIT:g}")
+                raise RunFailure(CaseStatus.DIVERGED,
+                                 f"state norm exceeds {DIVERGENCE_LIMIT:g}")
             self.t, self.y = float(out.t), np.array(out.y)
 
     def state_at(self, t: float) -> np.ndarray:

@@ -55,6 +55,7 @@ from mbh._adapters.integrators import integrator_class
 from mbh._adapters.integrators.multistep import LinearMultistep
 from mbh._adapters.integrators.newton import non_convergence
 from mbh._adapters.integrators.nystrom import NystromIntegrator
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.common import waits
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
@@ -392,24 +393,25 @@ class CompiledStepper(FormulationStepper):
         self._restart(q_full, v_full)
         self._check_due[0] = 0
 
-    def _failure(self, status: int) -> tuple[str, str]:
+    def _failure(self, status: int) -> tuple[CaseStatus, str]:
         """(status, reason) of a failure code, worded as the Python path words it."""
         failure = self._partition[8]
         if status == loop_codes.DIVERGED_LIMIT:
-            return "diverged", f"state norm exceeds divergence_limit={self._limit:g}"
+            return CaseStatus.DIVERGED, f"state norm exceeds divergence_limit={self._limit:g}"
         if status == loop_codes.DIVERGED_NONFINITE:
-            return "diverged", "non-finite state"
+            return CaseStatus.DIVERGED, "non-finite state"
         if status == loop_codes.FAILED_NEWTON and self._multistep:
             tol, max_iter, _ = self._method[2]  # method_arguments' (tol, max_iter, slow rate)
-            return "failed", "StepFailure: " + non_convergence(max_iter, tol,
-                                                               (self.steps + 1) * self.grid.dt)
+            reached = (self.steps + 1) * self.grid.dt
+            return CaseStatus.FAILED, "StepFailure: " + non_convergence(max_iter, tol, reached)
         if status == loop_codes.FAILED_NEWTON:
-            return "failed", (f"StepFailure: dependent coordinates did not converge (max |Φ| = "
-                              f"{failure[1]:.3g}) at t = {failure[2]:g}")
+            return CaseStatus.FAILED, ("StepFailure: dependent coordinates did not converge "
+                                       f"(max |Φ| = {failure[1]:.3g}) at t = {failure[2]:g}")
         if status == loop_codes.FAILED_RANK:
-            return "failed", (f"StepFailure: constraint Jacobian lost rank ({int(failure[1])} < "
-                              f"{self._model[loop_codes.ROWS].size}): singular configuration")
-        return "failed", "LinAlgError: a factorisation failed in the compiled step"
+            rows = self._model[loop_codes.ROWS].size
+            return CaseStatus.FAILED, ("StepFailure: constraint Jacobian lost rank "
+                                       f"({int(failure[1])} < {rows}): singular configuration")
+        return CaseStatus.FAILED, "LinAlgError: a factorisation failed in the compiled step"
 
     # -- reading -------------------------------------------------------------------------------
     def run(self, grid: RunGrid, n_bodies: int):
