@@ -4,8 +4,8 @@ still belongs to a scene.
 A reference is kept as two files named ``<scene>-<content hash[:16]>-v<version>``: the body
 states on the reference grid (``.npz``: times, position, quaternion, velocity, angular velocity)
 and its metadata (``.json``: the scene's name and hash, the version, the grid step, the two
-routes, their agreement and cost).  A refused build is recorded beside them
-(``.refused.json``).
+routes, their agreement and cost, and the independent route's agreement).  A refused build is
+recorded beside them (``.refused.json``).
 
 Shipped scenes come with their references (``scenarios/references``, inside the installed
 package); a reference built on this machine goes to the user cache (:func:`cache_dir`), never into
@@ -38,7 +38,8 @@ __all__ = ["REFERENCE_VERSION", "AGREEMENT_LIMIT", "ARRAYS", "CACHE_ENV", "cache
            "read_reference", "write_reference", "stale_reason", "stored_reference"]
 
 #: Version of the reference builder; bumping it (a formulation change) retires every stored file.
-REFERENCE_VERSION = 3
+#: 4: every reference names its independent route and that route's agreement.
+REFERENCE_VERSION = 4
 #: Largest difference allowed between the two routes of a reference, m or rad.
 AGREEMENT_LIMIT = 1e-9
 #: The arrays of a stored reference trajectory.
@@ -157,8 +158,8 @@ def stored_reference(mech: Mechanism) -> Trajectory | None:
 
 def stale_reason(mech: Mechanism, info: dict, trajectory: Trajectory, routes=None) -> str:
     """Why a stored reference does not belong to ``mech`` ('' when it does): scenario name,
-    content hash, version, grid step, routes (when given), agreement within
-    :data:`AGREEMENT_LIMIT`, and arrays on :func:`reference_grid`."""
+    content hash, version, grid step, routes (when given), the routes' and the independent
+    route's agreement within :data:`AGREEMENT_LIMIT`, and arrays on :func:`reference_grid`."""
     expected = {"scenario": mech.name, "content_hash": mech.content_hash,
                 "version": REFERENCE_VERSION, "grid_step": GRID_STEP}
     for key, value in expected.items():
@@ -169,9 +170,11 @@ def stale_reason(mech: Mechanism, info: dict, trajectory: Trajectory, routes=Non
         expected_routes = [list(route) for route in routes]
         if stored != expected_routes:
             return f"routes {stored!r} are not {expected_routes!r}"
-    agreement = info.get("agreement", {}).get("max")
-    if not isinstance(agreement, (int, float)) or not agreement <= AGREEMENT_LIMIT:
-        return f"route agreement {agreement!r} is not within {AGREEMENT_LIMIT:g}"
+    independent = info.get("independent", {}).get("difference", {})
+    for what, agreement in (("route agreement", info.get("agreement", {}).get("max")),
+                            ("independent route's agreement", independent.get("max"))):
+        if not isinstance(agreement, (int, float)) or not agreement <= AGREEMENT_LIMIT:
+            return f"{what} {agreement!r} is not within {AGREEMENT_LIMIT:g}"
     grid = reference_grid(mech)
     n_bodies = len(mech.bodies)
     shapes = {"times": (grid.size,), "position": (grid.size, n_bodies, 3),
