@@ -12,23 +12,22 @@ Their largest difference over the whole run — every position-level output and 
 of mass, in rad and m — is stored with the reference and must not exceed :data:`AGREEMENT_LIMIT`.
 Route A's trajectory is the reference.
 
-Routes A and B share the in-house constraint and dynamics code and differ only in the integrator,
-so a modelling error in that code (a wrong joint equation, inertia or γ term) would pass their
-agreement and make the in-house engine the measure of itself.  Every reference therefore also
-agrees, within the same limit and by the same measure, with a route that uses no contestant's
-code, its independent route (:func:`independent_route`, stored as ``independent`` in the
-metadata): here :data:`INDEPENDENT_ROUTE`, DOP853 at rtol = atol = 1e-13 on the harness's own
-joint equations and Newton–Euler dynamics (:func:`~mbh._harness.references.routes.full_route`),
-compared with route A at every sample of the whole run; it costs about one to five seconds a scene
-(a few times route A's cost on the compiled loop) and agrees to 3.6e-13 … 1.6e-10.  A planted error
-in the in-house tables or γ is refused by it (tests/references/test_independent_route.py).  The
-informational route stored here runs SUNDIALS IDA on the stabilised index-2 DAE
-(:data:`DAE_CHECK`), on the in-house equations too; IDA's corrector fails below rtol ≈ 1e-13, which
-keeps it short of the agreement limit on some scenes, so it is reported, not required.  Adaptive
-DOP853 on the partitioned form and fixed-step partitioning were rejected as routes: neither reaches
-the agreement limit on the spatial slider-crank (the reduced ODE steepens near a fold of the
-independent coordinate, see the in-house ``partition`` method).  Figures: docs/measurements.md,
-section "References".
+Routes A and B share the in-house constraint and dynamics code and differ only in the integrator, so
+a modelling error in that code (a wrong joint equation, inertia or γ term) would pass their
+agreement and make the in-house engine the measure of itself. Every reference therefore also agrees,
+within the same limit and by the same measure, with a route that uses no contestant's code, its
+independent route (:func:`independent_route`, stored as ``independent`` in the metadata): here
+:data:`INDEPENDENT_ROUTE`, DOP853 at rtol = atol = 1e-13 on the harness's own joint equations and
+Newton–Euler dynamics (:func:`~mbh._harness.references.routes.full_route`), compared with route A at
+every sample of the whole run; it costs 1–7 s a scene (route A 0.02–0.9 s on the compiled loop, the
+informational IDA check up to 100 s) and agrees to 3.6e-13 … 1.6e-10. A planted error in the
+in-house tables or γ is refused by it (tests/references/test_independent_route.py). The
+informational route stored here runs SUNDIALS IDA on the stabilised index-2 DAE (:data:`DAE_CHECK`),
+on the in-house equations too; IDA's corrector fails below rtol ≈ 1e-13, which keeps it short of the
+agreement limit on some scenes, so it is reported, not required. Adaptive DOP853 on the partitioned
+form and fixed-step partitioning were rejected as routes: neither reaches the agreement limit on the
+spatial slider-crank (the reduced ODE steepens near a fold of the independent coordinate, see the
+in-house ``partition`` method). Figures: docs/measurements.md, section "References".
 
 A scene that passes singular positions and declares the branch it stays on (``[reference]
 equal_joint_angles``, e.g. ``double_fourbar``), or that asks for them (``[reference] routes =
@@ -44,9 +43,9 @@ agreement limit.
 Shipped scenes come with their references (``scenarios/references``); a reference built here goes
 to the user cache (:mod:`mbh._harness.store.reference_files`: ``MBH_CACHE_DIR`` overrides both); a file is
 keyed by the scenario's content hash and :data:`REFERENCE_VERSION`, so editing a scenario, or
-bumping the version when the formulation changes, rebuilds it.  On load the stored metadata must
-match the scenario and the builder (name, content hash, version, grid step, routes, both
-agreements within the limit, arrays on the grid), or the reference is rebuilt; files are written atomically
+bumping the version when the formulation changes, rebuilds it. On load the stored metadata must
+match the scenario and the builder (name, content hash, version, grid step, routes, both agreements
+within the limit, arrays on the grid), or the reference is rebuilt; files are written atomically
 (unique temporary file, ``os.replace``), so processes of a pool can share the cache.
 
 A build takes seconds to minutes (docs/measurements.md, "References").  On a terminal it shows a
