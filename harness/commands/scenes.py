@@ -87,7 +87,8 @@ def check(args) -> int:
 
 def reference(args) -> int:
     """Build (or find) a scene's verified reference ahead of its first case and say where it is,
-    how well its two routes agree and what it cost (a refused build: exit 1)."""
+    how well its two routes agree, which route uses no contestant's code and how well it agrees,
+    and what it cost (a refused build: exit 1)."""
     from mbh._harness.references.build import load_or_build
     from mbh._harness.store.reference_files import reference_paths
 
@@ -97,6 +98,8 @@ def reference(args) -> int:
     result = {"scenario": mech.name, "content_hash": mech.content_hash,
               "data": str(data_path), "metadata": str(info_path),
               "agreement": info["agreement"]["max"],
+              "independent_route": info["independent"]["route"][0],
+              "independent_agreement": info["independent"]["difference"]["max"],
               "wall_time_s": sum(info[key]["wall_time_s"]
                                  for key in ("route_a_cost", "route_b_cost"))}
     if args.json:

@@ -104,3 +104,12 @@ def test_scenarios_with_no_scenario_files_says_where_it_looked(capsys, monkeypat
     out, err = capsys.readouterr()
     assert out.split() == ["name", "kind", "bodies", "joints", "tags"]
     assert f"no scenario files in {tmp_path}" in err
+
+
+def test_reference_names_its_independent_route_and_agreement(capsys):
+    """The shipped four-bar's reference: route A against the neutral full route (no contestant's
+    code), 1.5e-11 rad apart as stored; the command reports it, within the 1e-9 limit."""
+    status, result = run_json(capsys, "reference", "fourbar", "--quiet")
+    assert status == 0
+    assert result["independent_route"] == "neutral-full:dop853"
+    assert 0.0 < result["independent_agreement"] <= 1e-9
