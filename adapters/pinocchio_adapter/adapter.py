@@ -18,7 +18,7 @@ from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
 from mbh._adapters.integrators import IntegratorState, integrator_names, make_integrator
 from mbh._adapters.integrators.nystrom import NystromIntegrator, step_rule
 from mbh._adapters.pinocchio_adapter.build import PinocchioModel, build_model
-from mbh._adapters.pinocchio_adapter.dynamics import SolverSettings
+from mbh._adapters.pinocchio_adapter.dynamics import SolverSettings, redundancy_notes
 from mbh._adapters.pinocchio_adapter.state import body_states, joint_state
 from mbh._adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
 from mbh._harness.neutral.start import initial_state
@@ -141,10 +141,10 @@ class _PinocchioStepper(Stepper):
     def __init__(self, model: PinocchioModel, params: dict, grid: RunGrid):
         super().__init__()
         self.pm, self.grid = model, grid
-        self.notes = list(model.notes)
         self.problem = constrained_problem(model, solver_settings(params))
         start = initial_state(model.mechanism)
         q0, v0 = joint_state(model, self.problem.kin_data, start)
+        self.notes = redundancy_notes(self.problem, q0)
         try:
             self.integrator = make_integrator(params["integrator"], self.problem, 0.0, q0, v0,
                                               grid.dt)

@@ -60,8 +60,9 @@ class PinocchioModel:
         Tree joint name → Pinocchio joint id.
     tau_joint : ndarray, shape (nv,)
         Generalized forces of the joint actuations on tree joints, N·m or N.
-    notes : tuple of str
-        Facts about the translation a reader of a case must know.
+
+    The redundant closure equations are counted at the start of a run, where the loop is closed
+    (:func:`.dynamics.redundancy_notes`): this model has no assembled configuration of its own.
     """
 
     mechanism: Mechanism
@@ -71,7 +72,6 @@ class PinocchioModel:
     body_frames: tuple[int, ...]
     joint_ids: dict[str, int]
     tau_joint: np.ndarray
-    notes: tuple[str, ...]
 
 
 def closure_equations(mech: Mechanism, joint: Joint) -> int:
@@ -131,11 +131,8 @@ def build_model(mech: Mechanism) -> PinocchioModel:
     body_frames = tuple(model.getFrameId(body.name) for body in mech.bodies)
     constraints = tuple(c for name in tree.cut_joints
                         for c in _closure(model, mech, tree, joint_ids, mech.joint(name)))
-    notes = ()
-    if tree.redundant_closure_equations > 0:
-        notes = (f"{tree.redundant_closure_equations} redundant closure equation(s)",)
     return PinocchioModel(mech, tree, model, constraints, body_frames, joint_ids,
-                          _joint_actuation(mech, tree, model, joint_ids), notes)
+                          _joint_actuation(mech, tree, model, joint_ids))
 
 
 def _body(mech: Mechanism, name: str) -> Body | None:

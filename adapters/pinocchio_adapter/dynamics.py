@@ -226,11 +226,15 @@ class ConstrainedProblem:
             ``pin.getConstraintsJacobian``: the velocity of the first anchor relative to the
             second in the first anchor's axes, so the residual's rate where it vanishes.
         """
+        self.jacobian_evals += 1
+        return self.uncounted_closure(q)
+
+    def uncounted_closure(self, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`closure` off the cost counters (for the note of :func:`redundancy_notes`)."""
         model, data = self.model, self.kin_data
         pin.computeJointJacobians(model, data, q)
         for constraint, constraint_data in self._closure_pairs:
             constraint.calc(model, data, constraint_data)
-        self.jacobian_evals += 1
         residual = -np.concatenate([d.c1Mc2.translation for _, d in self._closure_pairs])
         return residual, pin.getConstraintsJacobian(model, data, self.constraints, self.kin_cdata)
 
@@ -270,6 +274,37 @@ def pseudo_inverse(jacobian: np.ndarray) -> np.ndarray:
     u, sigma, vt = np.linalg.svd(jacobian, full_matrices=False)
     kept = sigma > RANK_RTOL * sigma[0]
     return (vt[kept].T / sigma[kept]) @ u[:, kept].T
+
+
+def redundancy_notes(problem: ConstrainedProblem, q: np.ndarray) -> list[str]:
+    """The note counting the redundant closure equations at an assembled configuration ``q``.
+
+    The closure model's own excess (``tree.redundant_closure_equations``: a planar revolute
+    closed by a 3-D point, a spatial revolute by two) is not the whole count: an overconstrained
+    loop (Bennett's 4R, Bricard's 6R, parallel revolutes drawn in space) makes more rows
+    dependent.  The adapter may not use the harness's rank analysis, so it counts with its own:
+    the rank of the closure Jacobian it builds (:meth:`ConstrainedProblem.closure`), singular
+    values above :data:`RANK_RTOL` · σ_max, as its projection does.  The mechanism's count is the
+    rows beyond the rank less the closure model's excess.  At a singular position the rank drops
+    further and the count includes it; ``q`` should be the assembled start.
+
+    Returns
+    -------
+    list of str
+        One note when rows are redundant, none otherwise.
+    """
+    if not problem.constraints:
+        return []
+    _, jacobian = problem.uncounted_closure(q)
+    sigma = np.linalg.svd(jacobian, compute_uv=False)
+    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma[0] > 0.0 else 0
+    redundant = jacobian.shape[0] - rank
+    if redundant == 0:
+        return []
+    of_model = problem.pm.tree.redundant_closure_equations
+    return [f"{redundant} redundant closure equation(s) of {jacobian.shape[0]} (rank "
+            f"{rank} at the start): {redundant - of_model} of the mechanism, {of_model} of "
+            f"the closure model"]
 
 
 def _is_load(force, pm: PinocchioModel) -> bool:
