@@ -67,7 +67,7 @@ def test_a_kernel_changed_in_another_file_than_its_caller_is_compiled_again(tmp_
     warm; the test ~20 s."""
     copy, cache = _copy_of_the_package(tmp_path / "copy"), tmp_path / "cache"
     before = _phi(copy, cache)
-    bodykin = copy / "mbh" / "_adapters" / "inhouse" / "bodykin.py"
+    bodykin = copy / "mbh" / "_adapters" / "inhouse" / "bodies" / "bodykin.py"
     assert bodykin.read_text().count(ORIGINAL) == 1
     bodykin.write_text(bodykin.read_text().replace(ORIGINAL, EDITED))
     after = _phi(copy, cache)
