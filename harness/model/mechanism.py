@@ -18,6 +18,8 @@ Frames and units (SI throughout)
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -241,6 +243,10 @@ class Mechanism:
     tags: tuple[str, ...] = ()
     notes: str = ""
     source: str = ""
+    #: Identity of the mechanism for every cache keyed by it (the assembled start, references,
+    #: generated functions' traces): a scenario file's is the digest of its text, a mechanism
+    #: built in Python gets :func:`data_digest`'s; one changed with ``dataclasses.replace`` gets a
+    #: hash of its own (:meth:`__post_init__`), never its original's.
     content_hash: str = ""
     #: Pairs of joints that turn by equal angles on the assembly branch the motion stays on
     #: (``[reference] equal_joint_angles``); only the reference routes use them.
@@ -248,6 +254,21 @@ class Mechanism:
     #: Whether the reference takes the neutral DOP853 routes of :mod:`mbh._harness.references.routes`
     #: (``[reference] routes = "neutral"``, implied by a declared branch).
     neutral_routes: bool = False
+    #: :func:`data_digest` of the mechanism ``content_hash`` was given for (set on construction).
+    source_digest: str = field(default="", repr=False, compare=False)
+
+    def __post_init__(self):
+        """Give the mechanism the ``content_hash`` of what it is: :func:`data_digest` when none
+        was given, and a hash of its own when ``dataclasses.replace`` changed anything the hash
+        covers — a replaced start or mass under the original's hash would take the original's
+        cached start and reference, and be judged against another mechanism's motion."""
+        digest = data_digest(self)
+        if not self.content_hash:
+            object.__setattr__(self, "content_hash", digest)
+        elif self.source_digest and self.source_digest != digest:
+            own = hashlib.sha256(f"{self.content_hash}/{digest}".encode()).hexdigest()
+            object.__setattr__(self, "content_hash", own)
+        object.__setattr__(self, "source_digest", digest)
 
     @property
     def planar(self) -> bool:
@@ -278,6 +299,41 @@ class Mechanism:
     def masses(self) -> np.ndarray:
         """Body masses, shape (n_bodies,), kg."""
         return np.array([body.mass for body in self.bodies])
+
+
+#: The fields of a :class:`Mechanism` that do not change what is computed for it.
+_DESCRIPTIVE = ("name", "tags", "notes", "source", "content_hash", "source_digest")
+
+
+def data_digest(mech: Mechanism) -> str:
+    """SHA-256 (hex) of everything in ``mech`` that a computation reads (bodies, joints, forces,
+    gravity, start, duration, outputs, grids, reference routes), not its name, notes or source."""
+    digest = hashlib.sha256()
+    for item in dataclasses.fields(mech):
+        if item.name not in _DESCRIPTIVE:
+            digest.update(item.name.encode())
+            _feed(digest, getattr(mech, item.name))
+    return digest.hexdigest()
+
+
+def _feed(digest, value) -> None:
+    """Feed ``value`` (dataclasses, arrays, sequences, scalars, strings) to ``digest``, its type
+    and shape included so that no two values read alike."""
+    if dataclasses.is_dataclass(value):
+        digest.update(f"<{type(value).__name__}".encode())
+        for item in dataclasses.fields(value):
+            digest.update(item.name.encode())
+            _feed(digest, getattr(value, item.name))
+        digest.update(b">")
+    elif isinstance(value, np.ndarray):
+        digest.update(f"array {value.dtype.str} {value.shape}:".encode())
+        digest.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, (tuple, list)):
+        digest.update(f"sequence {len(value)}:".encode())
+        for item in value:
+            _feed(digest, item)
+    else:
+        digest.update(f"{type(value).__name__} {value!r};".encode())
 
 
 def characteristic_length(mech: Mechanism) -> float:

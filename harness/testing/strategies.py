@@ -24,7 +24,6 @@ this module.
 
 from __future__ import annotations
 
-import hashlib
 
 import numpy as np
 from hypothesis import strategies as st
@@ -43,6 +42,7 @@ from mbh._harness.model.mechanism import (
     JointActuation,
     Mechanism,
     SpringDamper,
+    data_digest,
 )
 
 #: Largest number of bodies of a generated tree.
@@ -335,18 +335,6 @@ def aligned_mechanisms(draw, planar: bool | None = None) -> Mechanism:
     return _with_hash(mech)
 
 
-def _content_hash(mech: Mechanism) -> str:
-    """A digest of everything in ``mech`` that an engine reads, in declaration order."""
-    digest = hashlib.sha256(mech.kind.encode())
-    for item in (*mech.bodies, *mech.joints, *mech.forces):
-        for value in vars(item).values():
-            digest.update(np.asarray(value).tobytes() if not isinstance(value, str)
-                          else value.encode())
-    digest.update(np.asarray(mech.gravity).tobytes())
-    digest.update(f"{mech.initial.driver}/{mech.initial.rate!r}".encode())
-    return digest.hexdigest()
-
-
 def redeclare(mech: Mechanism, body_order, joint_order) -> Mechanism:
     """The same mechanism with bodies and joints declared in another order.
 
@@ -372,7 +360,8 @@ def redeclare(mech: Mechanism, body_order, joint_order) -> Mechanism:
 
 
 def _with_hash(mech: Mechanism) -> Mechanism:
-    digest = _content_hash(mech)
+    """``mech`` named and hashed by its :func:`~mbh._harness.model.mechanism.data_digest`."""
+    digest = data_digest(mech)
     return Mechanism(**{**vars(mech), "name": f"generated-{digest[:12]}", "content_hash": digest})
 
 
