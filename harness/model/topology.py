@@ -37,6 +37,7 @@ from itertools import combinations
 
 import numpy as np
 
+from mbh._harness.common.errors import MbhError
 from mbh._harness.model.mechanism import (GROUND, PLANAR_JOINT_CLASS, SPATIAL_JOINT_CLASS, Joint,
                                           Mechanism)
 
@@ -221,13 +222,19 @@ def _other_end(joint: Joint, vertex: str) -> str | None:
     return None
 
 
+class DisconnectedGraphError(MbhError, ValueError):
+    """A body of the mechanism has no chain of joints to ground: it has no spanning tree."""
+
+
 def _require_connected(mech: Mechanism) -> None:
-    """Raise a ValueError naming the bodies of ``mech`` that no joint path links to ground."""
+    """Raise :class:`DisconnectedGraphError` naming the bodies of ``mech`` that no joint path
+    links to ground."""
     reached = _reachable_tree(mech.joints)
     lost = [body.name for body in mech.bodies if body.name not in reached]
     if lost:
-        raise ValueError(f"mechanism {mech.name!r}: the system graph is disconnected; no chain of "
-                         f"joints links {', '.join(map(repr, lost))} to ground")
+        raise DisconnectedGraphError(f"mechanism {mech.name!r}: the system graph is disconnected; "
+                                     f"no chain of joints links {', '.join(map(repr, lost))} "
+                                     "to ground")
 
 
 def _closure_costs(mech: Mechanism, closure_equations: Callable[[Joint], int]) -> list[int]:

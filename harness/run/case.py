@@ -12,6 +12,7 @@ from mbh._harness.common.capture import captured_output, engine_note
 from mbh._harness.neutral.conditioning import label_failure
 from mbh._harness.measure.metrics import case_metrics
 from mbh._harness.model.mechanism import Mechanism
+from mbh._harness.model.topology import DisconnectedGraphError
 from mbh._harness.model.timegrid import sample_times
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.measure.verdict import DEFAULT_BOUNDS, Bounds, judge
@@ -96,12 +97,17 @@ class _BuildBroke(Exception):
 
 
 def _built(adapter: Adapter, mech: Mechanism):
-    """``adapter.build(mech)``; any exception but UnsupportedCase becomes :class:`_BuildBroke`
-    (a third-party adapter and its package named, :func:`mbh._adapters.base.blame`)."""
+    """``adapter.build(mech)``; a mechanism the adapter cannot give a spanning tree (a body with
+    no joints to ground, which the in-house engine and Exudyn run) is :class:`UnsupportedCase`;
+    any other exception becomes :class:`_BuildBroke` (a third-party adapter and its package
+    named, :func:`mbh._adapters.base.blame`)."""
     try:
         return adapter.build(mech)
     except UnsupportedCase:
         raise
+    except DisconnectedGraphError as error:
+        raise UnsupportedCase(f"{adapter.name} builds its model as a tree of joints from the "
+                              f"ground: {error}") from error
     except Exception as error:  # noqa: BLE001 — a build that breaks is a result (rule 6)
         raise _BuildBroke(blame(adapter.source, "build", error)) from error
 

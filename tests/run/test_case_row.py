@@ -8,6 +8,7 @@ import math
 
 import pytest
 
+import mbh
 from mbh._adapters import get_adapter
 from mbh._harness.run import row as case_row
 from mbh._harness.model import scenario
@@ -15,6 +16,7 @@ from mbh._harness.run.spec import CaseSpec
 from mbh._harness.run.row import error_row, run_spec
 from mbh._harness.references.build import ReferenceBuildError
 from mbh._harness.measure.verdict import DEFAULT_BOUNDS
+from tests.outside.mechanisms import floating_pair
 
 #: Columns every row carries (the interface of issue 10), besides error_/final_<output>.
 REQUIRED = {
@@ -121,3 +123,15 @@ def test_model_size(adapter_name, name):
     assert (size["coordinates"], size["constraint_equations"], size["redundant_equations"]) == \
         MODEL_SIZES[adapter_name][name]
     assert isinstance(size["notes"], str) and size["notes"]
+
+
+@pytest.mark.parametrize("engine", ["mujoco", "pinocchio", "pybullet"])
+def test_a_mechanism_with_no_joint_to_ground_is_unsupported_by_tree_builders(engine):
+    """Two bodies hinged together and to nothing else: the in-house engine and Exudyn run it;
+    the engines that build a tree of joints from the ground cannot (it was 'failed', a
+    ValueError of the spanning tree, where a mechanism an adapter cannot build is
+    'unsupported')."""
+    result = mbh.run_case(floating_pair(), engine, "best", dt=1e-3, t_end=0.01)
+    assert result.status == "unsupported"
+    assert "the system graph is disconnected" in result.reason
+    assert result.reason.startswith(f"{engine} builds its model as a tree of joints")
