@@ -26,6 +26,8 @@ from typing import Literal
 import numpy as np
 from scipy.spatial.distance import pdist
 
+from mbh._harness.common.digest import feed
+
 GROUND = "ground"
 
 JOINT_TYPES = ("revolute", "prismatic", "spherical", "universal", "cylindrical", "translational")
@@ -312,28 +314,8 @@ def data_digest(mech: Mechanism) -> str:
     for item in dataclasses.fields(mech):
         if item.name not in _DESCRIPTIVE:
             digest.update(item.name.encode())
-            _feed(digest, getattr(mech, item.name))
+            feed(digest, getattr(mech, item.name))
     return digest.hexdigest()
-
-
-def _feed(digest, value) -> None:
-    """Feed ``value`` (dataclasses, arrays, sequences, scalars, strings) to ``digest``, its type
-    and shape included so that no two values read alike."""
-    if dataclasses.is_dataclass(value):
-        digest.update(f"<{type(value).__name__}".encode())
-        for item in dataclasses.fields(value):
-            digest.update(item.name.encode())
-            _feed(digest, getattr(value, item.name))
-        digest.update(b">")
-    elif isinstance(value, np.ndarray):
-        digest.update(f"array {value.dtype.str} {value.shape}:".encode())
-        digest.update(np.ascontiguousarray(value).tobytes())
-    elif isinstance(value, (tuple, list)):
-        digest.update(f"sequence {len(value)}:".encode())
-        for item in value:
-            _feed(digest, item)
-    else:
-        digest.update(f"{type(value).__name__} {value!r};".encode())
 
 
 def characteristic_length(mech: Mechanism) -> float:

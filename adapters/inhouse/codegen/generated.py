@@ -46,6 +46,7 @@ from mbh._adapters.inhouse.codegen import generated_store, tracing
 from mbh._adapters.inhouse.formulations import dynamics, mass_and_forces
 from mbh._adapters.inhouse.numerics import banded, linalg
 from mbh._harness.common import waits
+from mbh._harness.common.digest import feed
 from mbh._harness.common.kernel_cache import kernel_fingerprint
 
 # The compiled loop takes the generated functions as first-class function values, a numba
@@ -195,30 +196,14 @@ def trace_key(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> str | 
     function is then traced every time)."""
     digest = hashlib.sha256(kernel_fingerprint().encode())
     try:
-        _digest(digest, (which, formulation.rows, formulation.gains,
-                         getattr(formulation, "cut", None),  # projected formulations only
-                         formulation.constraints.kernel_args,
-                         formulation.constraints.sparsity.arrays,
-                         formulation.dynamics.kernel_args, q0, v0))
+        feed(digest, (which, formulation.rows, formulation.gains,
+                      getattr(formulation, "cut", None),  # projected formulations only
+                      formulation.constraints.kernel_args,
+                      formulation.constraints.sparsity.arrays,
+                      formulation.dynamics.kernel_args, q0, v0))
     except TypeError:
         return None
     return digest.hexdigest()
-
-
-def _digest(digest, value) -> None:
-    """Feed ``value`` (nested tuples and lists of numeric arrays and scalars) to ``digest``, its
-    structure, types, shapes and bytes; raises TypeError for anything else."""
-    if isinstance(value, np.ndarray) and value.dtype != object:
-        digest.update(f"array {value.dtype.str} {value.shape}:".encode())
-        digest.update(np.ascontiguousarray(value).tobytes())
-    elif isinstance(value, (tuple, list)):
-        digest.update(f"sequence {len(value)}:".encode())
-        for item in value:
-            _digest(digest, item)
-    elif value is None or isinstance(value, (bool, int, float, np.bool_, np.number)):
-        digest.update(f"scalar {type(value).__name__} {value!r};".encode())
-    else:
-        raise TypeError(f"a trace input of type {type(value).__name__}")
 
 
 def module_name(source: str) -> str:
