@@ -43,13 +43,11 @@ ADAPTERS_FOLDER = HARNESS_FOLDER.parent / ("adapters" if HARNESS_FOLDER.name == 
 #: The folder holding both: the checkout, or the installed mbh package.
 CODE_ROOT = HARNESS_FOLDER.parent
 
-_CHECKOUT = CODE_ROOT
-
 
 def checkout() -> Path | None:
     """The repository the harness runs from (a checkout or an editable install), or None for an
     installed wheel: the folder holding ``pyproject.toml`` beside the ``harness`` folder."""
-    return _CHECKOUT if (_CHECKOUT / "pyproject.toml").is_file() else None
+    return CODE_ROOT if (CODE_ROOT / "pyproject.toml").is_file() else None
 
 
 def shipped(folder: str) -> Path:
@@ -60,7 +58,7 @@ def shipped(folder: str) -> Path:
     packaged = Path(str(importlib.resources.files("mbh._harness") / folder))
     if packaged.is_dir():
         return packaged
-    return _CHECKOUT / folder
+    return CODE_ROOT / folder
 
 
 def user_cache() -> Path:
