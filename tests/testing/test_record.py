@@ -35,8 +35,13 @@ def test_case(case, mbh_runner, mbh_tolerances):
 
 
 def pytest_in(folder: Path, *args: str) -> subprocess.CompletedProcess:
-    """``python -m pytest -q`` in ``folder`` (its own rootdir)."""
-    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", *args],
+    """``python -m pytest -q`` in ``folder`` (its own rootdir), without the short test summary.
+
+    The summary repeats a failure's message only when the terminal is wide enough for it, so
+    counting messages with it on depends on the terminal the suite runs in (``-rN`` turns it off).
+    """
+    return subprocess.run([sys.executable, "-m", "pytest", "-q", "-rN", "-p", "no:cacheprovider",
+                           *args],
                           cwd=folder, capture_output=True, text=True, timeout=600, check=False)
 
 
