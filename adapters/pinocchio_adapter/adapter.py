@@ -18,12 +18,16 @@ from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
 from mbh._adapters.integrators import IntegratorState, integrator_names, make_integrator
 from mbh._adapters.integrators.nystrom import NystromIntegrator, step_rule
 from mbh._adapters.pinocchio_adapter.build import PinocchioModel, build_model
-from mbh._adapters.pinocchio_adapter.dynamics import SolverSettings, redundancy_notes
+from mbh._adapters.pinocchio_adapter.dynamics import (
+    SolverSettings,
+    proximal_notes,
+    redundancy_notes,
+)
 from mbh._adapters.pinocchio_adapter.state import body_states, joint_state
 from mbh._adapters.pinocchio_adapter.stepping import bare_rule, bare_steps, constrained_problem
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.model.trajectory import BodyStates
+from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 _PIN_DEFAULTS = pin.ProximalSettings()
 #: Parameters every method takes, at Pinocchio's own defaults (``ProximalSettings()`` as
@@ -159,6 +163,13 @@ class _PinocchioStepper(Stepper):
         self._unchecked_rule = (
             step_rule(type(self.integrator), self.problem, self.problem.counted_acceleration)
             if isinstance(self.integrator, NystromIntegrator) else None)
+
+    def run(self, grid: RunGrid, n_bodies: int) -> Trajectory:
+        """The shared run loop, then the note on unconverged proximal solves
+        (:func:`.dynamics.proximal_notes`), which only the whole run can count."""
+        trajectory = super().run(grid, n_bodies)
+        trajectory.notes.extend(proximal_notes(self.problem))
+        return trajectory
 
     def _step_to(self, t: float) -> None:
         integrator, target = self.integrator, self.grid.steps(t)

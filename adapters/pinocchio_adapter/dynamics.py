@@ -73,7 +73,17 @@ class ProjectionFailure(ValueError):
 
 #: The cost counters of :class:`ConstrainedProblem`, in the order the case row lists them.
 COUNTER_NAMES = ("constraint_dynamics_calls", "proximal_iterations", "max_relative_residual",
-                 "newton_iterations", "jacobian_evals", "projection_factorizations")
+                 "unconverged_solves", "newton_iterations", "jacobian_evals",
+                 "projection_factorizations")
+
+#: A proximal solve whose relative residual (``ProximalSettings.relative_residual`` after the call)
+#: stays above this counts as unconverged: its iteration was not settling, it was driving the
+#: multiplier of inconsistent rows up.  Measured with ``best`` (accuracy 1e-12, 20 iterations) at
+#: dt 1e-3 s (benchmarks/hard_loops.py): largest residual 128 (Bennett's 4R) and 12 (Bricard),
+#: where the error is 1e6x the in-house formulation's; 1.8e-5 (the parallel-revolute four-bar)
+#: and 2.4e-7 (the flat parallelogram), whose solves also stop at ``max_iter`` but whose error is
+#: within 1.4x of the best engine's; 1e-12 on the shipped four-bars and slider-cranks.
+UNCONVERGED_RESIDUAL = 1e-2
 
 
 class ConstrainedProblem:
@@ -92,6 +102,8 @@ class ConstrainedProblem:
         Calls of ``pin.constraintDynamics`` and their proximal iterations (summed).
     max_relative_residual : float
         The largest relative residual of the proximal solves.
+    unconverged_solves : int
+        Proximal solves that ended with a relative residual above :data:`UNCONVERGED_RESIDUAL`.
     newton_iterations, jacobian_evals, projection_factorizations : int
         Gauss–Newton iterations of the position projection, constraint Jacobians of the
         projection, pseudo-inverses of the closure Jacobian (one per projection).
@@ -120,6 +132,7 @@ class ConstrainedProblem:
         # and attribute updates save ~0.07 µs of a symplectic-Euler step's ~5.5 µs.
         self.constraint_dynamics_calls = self.proximal_iterations = 0
         self.max_relative_residual = 0.0
+        self.unconverged_solves = 0
         self.newton_iterations = self.jacobian_evals = self.projection_factorizations = 0
 
     @property
@@ -172,6 +185,8 @@ class ConstrainedProblem:
         residual = prox.relative_residual
         if residual > self.max_relative_residual:
             self.max_relative_residual = residual
+        if residual > UNCONVERGED_RESIDUAL:
+            self.unconverged_solves += 1
         return a
 
     def engine_acceleration(self, t: float, q: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -305,6 +320,34 @@ def redundancy_notes(problem: ConstrainedProblem, q: np.ndarray) -> list[str]:
     return [f"{redundant} redundant closure equation(s) of {jacobian.shape[0]} (rank "
             f"{rank} at the start): {redundant - of_model} of the mechanism, {of_model} of "
             f"the closure model"]
+
+
+def proximal_notes(problem: ConstrainedProblem) -> list[str]:
+    """The note naming the engine's limit when proximal solves of the run did not converge.
+
+    ``pin.constraintDynamics`` solves the closure rows by a proximal iteration with an absolute
+    regularisation ``mu`` and no rank-revealing treatment of dependent rows.  Where a spatial
+    overconstrained loop's redundant rows stop being consistent (an explicit integrator's stages
+    off the closure manifold), the iteration cannot satisfy them and its multiplier grows by
+    about residual / mu per iteration; the acceleration error grows with ``max_iter`` / mu
+    (docs/measurements.md, "Engine settings on hard loops").  The note counts those solves
+    (:data:`UNCONVERGED_RESIDUAL`) and gives the largest residual, both measured in the run.
+
+    Returns
+    -------
+    list of str
+        One note when any solve ended unconverged, none otherwise.
+    """
+    count = problem.unconverged_solves
+    if count == 0:
+        return []
+    return [f"engine limit: {count} of {problem.constraint_dynamics_calls} "
+            f"pin.constraintDynamics solves ended unconverged (relative residual above "
+            f"{UNCONVERGED_RESIDUAL:g}, largest {problem.max_relative_residual:.3g}, after at "
+            f"most {problem.prox.max_iter} proximal iterations, mu = {problem.prox.mu:g}): "
+            f"Pinocchio's proximal solver cannot satisfy redundant closure rows that an "
+            f"integrator's stages off the closure manifold make inconsistent, and the error "
+            f"grows as max_iter / mu (docs/measurements.md, \"Engine settings on hard loops\")"]
 
 
 def _is_load(force, pm: PinocchioModel) -> bool:

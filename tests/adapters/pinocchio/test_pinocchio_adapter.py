@@ -90,7 +90,8 @@ def test_note_counts_the_mechanisms_redundant_equations(mech, rows, mechanism, c
     """The run's note counts the redundant rows by the rank of the closure Jacobian at the start
     (the counts of the in-house rank analysis: Bennett 3, the four-bar of parallel revolutes 3,
     Bricard 1), split into the mechanism's and the closure model's."""
-    notes = _run(mech, "best", 1e-3, 1e-3).notes
+    notes = [note for note in _run(mech, "best", 1e-3, 1e-3).notes
+             if not note.startswith("engine limit:")]  # the proximal solves' (run-dependent)
     redundant = mechanism + closure_model
     expected = [f"{redundant} redundant closure equation(s) of {rows} (rank {rows - redundant} "
                 f"at the start): {mechanism} of the mechanism, {closure_model} of the closure "
