@@ -20,24 +20,70 @@ from mbh._adapters.mujoco_adapter.stepping import Stepping
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.common.status import CaseStatus
-from mbh._harness.model.trajectory import BodyStates
+from mbh._harness.model.trajectory import BodyStates, Trajectory
 
 
-def _notes(built: MujocoModel, model: mujoco.MjModel) -> list[str]:
-    """Facts a reader of a run must know."""
+#: Singular values of the equality rows' Jacobian at or below this fraction of the largest count
+#: as zero (the rank behind the redundancy note; Pinocchio's adapter counts with the same cut).
+RANK_RTOL = 1e-10
+
+
+def _notes(built: MujocoModel, model: mujoco.MjModel, rows: int, rank: int) -> list[str]:
+    """Facts a reader of a run must know; ``rows`` and ``rank`` are the equality rows and the
+    rank of their Jacobian at the start (:func:`_equality_rank`)."""
     notes = list(built.notes)
-    redundant = built.tree.redundant_closure_equations
+    redundant = rows - rank
     if redundant > 0:
-        notes.append(f"{redundant} redundant closure equation(s)")
-    if model.neq:
-        solref = ", ".join(f"{value:g}" for value in model.eq_solref[0])
-        solimp = ", ".join(f"{value:g}" for value in model.eq_solimp[0])
-        notes.append(f"equality solref ({solref}), solimp ({solimp}); MuJoCo's refsafe clamps "
-                     f"the time constant to >= 2·dt")
+        of_model = built.tree.redundant_closure_equations
+        notes.append(f"{redundant} redundant closure equation(s) of {rows} (rank {rank} at the "
+                     f"start): {redundant - of_model} of the mechanism, {of_model} of the "
+                     f"closure model")
     if built.loads.moving:
         notes.append("pose-dependent loads (cut-joint actuation, off-centre forces) are "
                      "recomputed once per step and held constant within it")
     return notes
+
+
+def _equality_rank(built: MujocoModel, model: mujoco.MjModel, data: mujoco.MjData) -> tuple:
+    """The equality rows MuJoCo builds at ``data``'s state and the rank of their Jacobian
+    (``efc_J``, singular values above :data:`RANK_RTOL` · σ_max), from a scratch copy of the
+    data so the run's own is untouched.  The count includes the mechanism's redundancy (an
+    overconstrained loop), not only the closure model's (a planar revolute closed by a point)."""
+    if not model.neq:
+        return 0, 0
+    probe = mujoco.MjData(model)
+    probe.qpos[:], probe.qvel[:] = data.qpos, data.qvel
+    mujoco.mj_forward(model, probe)
+    rows = probe.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+    if mujoco.mj_isSparse(model):
+        jacobian = np.zeros((probe.nefc, model.nv))
+        mujoco.mju_sparse2dense(jacobian, probe.efc_J, probe.efc_J_rownnz, probe.efc_J_rowadr,
+                                probe.efc_J_colind)
+    else:
+        jacobian = probe.efc_J.reshape(probe.nefc, model.nv)
+    jacobian = jacobian[rows]
+    if not len(jacobian):
+        return 0, 0
+    sigma = np.linalg.svd(jacobian, compute_uv=False)
+    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma[0] > 0.0 else 0
+    return int(jacobian.shape[0]), rank
+
+
+def _softness_notes(model: mujoco.MjModel, residual: float) -> list[str]:
+    """The note naming the engine's limit on a model with equality constraints: they are soft,
+    and their residual, here the largest ``efc_pos`` of an equality row at the run's samples
+    (m), sets the error's floor (measured: docs/measurements.md, "Engine settings on hard
+    loops")."""
+    if not model.neq:
+        return []
+    solref = ", ".join(f"{value:g}" for value in model.eq_solref[0])
+    solimp = ", ".join(f"{value:g}" for value in model.eq_solimp[0])
+    return [f"engine limit: soft equality constraints, solref ({solref}), solimp ({solimp}); "
+            f"MuJoCo's refsafe clamps the time constant to >= 2·dt and the impedance to <= "
+            f"0.9999, so the loops close only to a residual that shrinks with the time constant "
+            f"squared (largest equality residual at the samples {residual:.2g} m); with the time "
+            f"constant at 2·dt the error falls only as dt², whatever the integrator (docs/measurements.md, \"Engine "
+            f"settings on hard loops\")"]
 
 
 # --------------------------------------------------------------------------------------------
@@ -111,10 +157,18 @@ class _MujocoStepper(Stepper):
         self.data.qfrc_applied[:] = built.loads.qfrc
         self.data.xfrc_applied[:] = built.loads.xfrc
         self.stages = STAGES[params["integrator"]]
-        self.notes = _notes(built, self.model)
         self._previous = _set_start(built, self.model, self.data,
                                     initial_state(built.mechanism)).quaternion
+        self.notes = _notes(built, self.model, *_equality_rank(built, self.model, self.data))
         self.stepping = Stepping(self.model, self.data, built.loads)
+        self._residual = 0.0  # the largest equality residual at the samples, m
+
+    def run(self, grid: RunGrid, n_bodies: int) -> Trajectory:
+        """The shared run loop, then the note on the soft equality constraints with the largest
+        residual the run's samples met (:func:`_softness_notes`)."""
+        trajectory = super().run(grid, n_bodies)
+        trajectory.notes.extend(_softness_notes(self.model, self._residual))
+        return trajectory
 
     def _step_to(self, t: float) -> None:
         count = self.grid.steps(t) - self.steps
@@ -138,7 +192,12 @@ class _MujocoStepper(Stepper):
                                                "would reset and carry on)")
 
     def _states(self, t: float) -> BodyStates:
-        states = _body_states(self.built, self.model, self.data, self._previous)
+        data = self.data
+        if self.model.neq and data.nefc:
+            rows = data.efc_type == mujoco.mjtConstraint.mjCNSTR_EQUALITY
+            if rows.any():
+                self._residual = max(self._residual, float(np.abs(data.efc_pos[rows]).max()))
+        states = _body_states(self.built, self.model, data, self._previous)
         self._previous = states.quaternion
         return states
 
