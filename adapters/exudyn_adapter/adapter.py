@@ -93,15 +93,7 @@ class ExudynAdapter(Adapter):
         (Euler-parameter nodes, the methods' default rotation; the AE include one normalisation
         per spatial node), and the redundant AE: rows minus the rank (``numpy.linalg.matrix_rank``)
         of Exudyn's own ∂AE/∂q at the start (``ComputeJacobianAE``, the ODE2 columns)."""
-        with _quiet():
-            system = ExudynSystem(model.mechanism, "ep")
-            solver = exu.MainSolverImplicitSecondOrder()
-            settings = exu.SimulationSettings()
-            settings.solution.file.write = False  # else solution/ appears in the working folder
-            solver.InitializeSolver(system.mbs, settings)
-            solver.ComputeJacobianAE(system.mbs, 1.0, 0.0, 0.0, False)
-        coordinates, rows = int(solver.GetODE2size()), int(solver.GetAEsize())
-        rank = int(np.linalg.matrix_rank(solver.GetSystemJacobian()[coordinates:, :coordinates]))
+        coordinates, rows, rank = _algebraic_rank(model.mechanism, "ep")
         return {"coordinates": coordinates, "constraint_equations": rows,
                 "redundant_equations": rows - rank,
                 "notes": f"Exudyn ODE2 size {coordinates}, AE size {rows}, rank of ∂AE/∂q "
@@ -149,7 +141,7 @@ class _ExudynStepper(Stepper):
 
     def __init__(self, model: ExudynModel, name: str, params: dict, grid: RunGrid):
         super().__init__()
-        self.grid = grid
+        self.grid, self.mechanism, self.rotation = grid, model.mechanism, params["rotation"]
         self.notes = _notes(model.mechanism, name, params)
         n_steps = grid.steps(grid.t_end)
         indices = np.append(np.rint(grid.sample_times / grid.dt).astype(int), n_steps)
@@ -167,7 +159,8 @@ class _ExudynStepper(Stepper):
             self.steps = self._outcome.steps
             self.t_good = self._outcome.t_good
         if self._outcome.status != CaseStatus.OK and self.grid.steps(t) > self._outcome.steps:
-            raise RunFailure(self._outcome.status, self._outcome.reason)
+            raise RunFailure(self._outcome.status,
+                             _singular_limit(self.mechanism, self.rotation) + self._outcome.reason)
 
     def _states(self, t: float) -> BodyStates:
         if self._sensed is None:
@@ -179,6 +172,41 @@ class _ExudynStepper(Stepper):
 
     def counters(self) -> dict:
         return {} if self._outcome is None else dict(self._outcome.counters)
+
+
+def _algebraic_rank(mechanism: Mechanism, rotation: str) -> tuple[int, int, int]:
+    """ODE2 coordinates, algebraic equations (AE) and the rank (``numpy.linalg.matrix_rank``) of
+    Exudyn's own ∂AE/∂q at the start (``ComputeJacobianAE``, the ODE2 columns) of the system a
+    run with nodes ``rotation`` builds."""
+    with _quiet():
+        system = ExudynSystem(mechanism, rotation)
+        solver = exu.MainSolverImplicitSecondOrder()
+        settings = exu.SimulationSettings()
+        settings.solution.file.write = False  # else solution/ appears in the working folder
+        solver.InitializeSolver(system.mbs, settings)
+        solver.ComputeJacobianAE(system.mbs, 1.0, 0.0, 0.0, False)
+    coordinates, rows = int(solver.GetODE2size()), int(solver.GetAEsize())
+    rank = int(np.linalg.matrix_rank(solver.GetSystemJacobian()[coordinates:, :coordinates]))
+    return coordinates, rows, rank
+
+
+def _singular_limit(mechanism: Mechanism, rotation: str) -> str:
+    """The prefix of a failed run's reason naming the engine's limit on an overconstrained loop
+    ('' on other mechanisms): with as many algebraic equations (AE) as coordinates or more, a
+    mechanism that moves has at least AE − coordinates + 1 redundant ones, and Exudyn solves
+    every step by Newton on a system Jacobian they make singular.  On spatial overconstrained
+    loops (Bennett's 4R, Bricard's 6R) full Newton stops converging at some step,
+    ``ignoreSingularJacobian`` or not (docs/measurements.md, "Engine settings on hard loops").
+    The prefix gives the counts and the rank of Exudyn's own ∂AE/∂q at the start, as its system
+    for the run's nodes builds them (on those two loops that rank is full: 21 of 21 coordinates,
+    35 of 35, where the mechanism moves; the harness appends the mechanism's own count)."""
+    coordinates, rows, rank = _algebraic_rank(mechanism, rotation)
+    if rows < coordinates:
+        return ""
+    return (f"engine limit: Exudyn's Newton iteration on redundant equations ({rows} algebraic "
+            f"equations on {coordinates} coordinates: at least {rows - coordinates + 1} "
+            f"redundant for the mechanism to move; rank of Exudyn's ∂AE/∂q at the start "
+            f"{rank}): ")
 
 
 def _solver(model: ExudynModel, settings: exu.SimulationSettings):
@@ -193,12 +221,18 @@ def _solver(model: ExudynModel, settings: exu.SimulationSettings):
 # notes
 
 
+#: The note naming the limit every run of an implicit method meets: its order.
+ORDER_NOTE = ("engine limit: Exudyn's implicit integrators (generalized-α, Newmark) are second "
+              "order, so the error falls as dt² (100× per 10× smaller step) where the fourth-order "
+              "methods' falls as dt⁴ (docs/measurements.md, \"Engine settings on hard loops\")")
+
+
 def _notes(mech: Mechanism, name: str, params: dict) -> list[str]:
     if mech.planar:
         return [f"exudyn {name}: planar model with NodeRigidBody2D "
-                f"(parameter 'rotation' is not used)"]
+                f"(parameter 'rotation' is not used)", ORDER_NOTE]
     node = "NodeRigidBodyEP" if params["rotation"] == "ep" else "NodeRigidBodyRotVecLG"
-    return [f"exudyn {name}: spatial model with {node}"]
+    return [f"exudyn {name}: spatial model with {node}", ORDER_NOTE]
 
 
 @contextlib.contextmanager

@@ -72,8 +72,10 @@ BENNETT_DT, BENNETT_T_END = 1e-3, 1.0
 BENNETT_MEASURED = {"inhouse": (1.4e-16, 1.3e-15, 1.3e-15), "mujoco": (2.9e-10, 1.7e-9, 2.7e-9),
                     "pinocchio": (8.5e-16, 6.9e-15, 3.3e-14)}
 BENNETT_NOT_OK = {
-    "exudyn": "failed: exudyn solver failed: reduction of step size reached minimum step size "
-              "(overconstrained loop: 3 of the 20 joint equations are redundant)",
+    "exudyn": "failed: engine limit: Exudyn's Newton iteration on redundant equations (23 "
+              "algebraic equations on 21 coordinates: at least 3 redundant …): exudyn solver "
+              "failed: reduction of step size reached minimum step size … (overconstrained loop: "
+              "3 of the 20 joint equations are redundant)",
     "pybullet": "unsupported: cut joint 'J2' is revolute: a Bullet multibody closes loops only "
                 "with point-to-point constraints",
 }

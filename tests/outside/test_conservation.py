@@ -45,8 +45,10 @@ MECHANISMS = {"bennett": (bennett_linkage, 1.0), "fourbar_free": (free_fourbar, 
 #: Engines that do not run a mechanism ok, with the status and reason measured.
 NOT_OK = {
     "bennett": {
-        "exudyn": "failed: exudyn solver failed: reduction of step size reached minimum step "
-                  "size (overconstrained loop: 3 of the 20 joint equations are redundant)",
+        "exudyn": "failed: engine limit: Exudyn's Newton iteration on redundant equations "
+                  "(23 algebraic equations on 21 coordinates: at least 3 redundant …): exudyn "
+                  "solver failed: reduction of step size reached minimum step size … "
+                  "(overconstrained loop: 3 of the 20 joint equations are redundant)",
         "pybullet": "unsupported: cut joint 'J2' is revolute: a Bullet multibody closes loops "
                     "only with point-to-point constraints"},
     "fourbar_free": {},
