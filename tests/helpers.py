@@ -252,3 +252,32 @@ def spring_damper_tree():
                       damping=0.5, free_length=1.5))
     return (builder.initial(driver="O", value=0.0, rate=0.0)
             .output("upper_angle", "joint_angle", joint="O").build())
+
+
+def flat_parallelogram(duration: float = 0.4):
+    """The shipped parallelogram four-bar's rods (principal moment 0 about their length: flat
+    bodies) drawn in space with four revolutes about z: three redundant equations.  Over 0.4 s,
+    before its flattened passage at 0.54 s."""
+    document = tomllib.loads((SCENARIO_DIR / "parallelogram_fourbar.toml").read_text(
+        encoding="utf-8"))
+    builder = mbh.MechanismBuilder("flat_parallelogram", kind="spatial", duration=duration,
+                                   gravity=document["gravity"])
+    for body in document["bodies"]:
+        half = math.radians(body["angle_deg"]) / 2.0
+        builder = builder.body(body["name"], mass=body["mass"], inertia=body["inertia"],
+                               position=body["position"],
+                               quaternion=[math.cos(half), 0.0, 0.0, math.sin(half)])
+    for joint in document["joints"]:
+        builder = builder.joint(joint["name"], "revolute", body1=joint["body1"],
+                                body2=joint["body2"], location=joint["location"],
+                                axis=[0.0, 0.0, 1.0])
+    return (builder.initial(driver="O1", value=0.0, rate=0.0)
+            .output("crank_angle", "joint_angle", joint="O1").build())
+
+
+def rsrr_fourbar():
+    """``fourbar_spatial`` with its cylindrical joint made a revolute: R-S-R-R, one redundant
+    equation (the spherical joint's spin about the coupler's length)."""
+    document = tomllib.loads(variant_text("fourbar_spatial", [('type = "cylindrical"',
+                                                               'type = "revolute"')]))
+    return scenario.from_document(document, "fourbar_rsrr", "fourbar_rsrr")
