@@ -330,11 +330,32 @@ def _inaccurate_sentence(frame: pd.DataFrame, accuracy: float) -> str | None:
         kinds = [outcome(row, accuracy) for row in group.to_dict("records")]
         if "inaccurate" in kinds and "accurate" not in kinds:
             errors = group.loc[group["status"] == CaseStatus.OK, "main_output_error"].astype(float)
-            worst.append(f"{adapter} {method} (smallest error {errors.min():.2g})")
+            limit = _limit_note(group)
+            worst.append(f"{adapter} {method} (smallest error {errors.min():.2g}"
+                         + (f"; {_short(limit)}" if limit else "") + ")")
     if not worst:
         return None
     return (f"Run through but never within {accuracy:g} (ok and inaccurate, reported as such): "
             f"{'; '.join(worst)}.")
+
+
+#: The start of an adapter's note naming the engine's limit (docs/measurements.md, "Engine
+#: settings on hard loops").
+LIMIT_NOTE = "engine limit:"
+
+
+def _limit_note(group: pd.DataFrame) -> str:
+    """The first note naming an engine's limit among the rows of ``group`` ('' when none does);
+    a row's ``notes`` are stored as a JSON list."""
+    for text in group["notes"] if "notes" in group else ():
+        try:
+            notes = json.loads(text) if isinstance(text, str) else list(text)
+        except (TypeError, ValueError):
+            continue
+        for note in notes:
+            if str(note).startswith(LIMIT_NOTE):
+                return str(note)
+    return ""
 
 
 def _unsupported_sentence(frame: pd.DataFrame) -> str | None:

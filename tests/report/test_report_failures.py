@@ -9,6 +9,7 @@ of the shipped reference is checked against the tip's passages through y = 0.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,9 @@ from mbh._harness.store.runs import RunStore
 SCENE = "double_fourbar"
 T_END = 2.0
 UNSUPPORTED_REASON = "synthetic: this engine has no planar revolute joint"
+#: A note naming an engine's limit, as the Pinocchio adapter writes it (longer than a quote).
+LIMIT_NOTE = ("engine limit: 2718 of 4000 pin.constraintDynamics solves ended unconverged "
+              "(relative residual above 0.01, largest 128, after at most 20 proximal iterations)")
 
 
 def _spec(adapter: str, method: str, dt: float) -> CaseSpec:
@@ -43,6 +47,9 @@ ROWS = (
     (_spec("mujoco", "default", 1e-3), {"status": "ok", "reason": "", "main_output_error": 3e-2,
                                         "accurate": False, "wall_time_s": 0.2}),
     (_spec("pybullet", "default", 1e-3), {"status": "unsupported", "reason": UNSUPPORTED_REASON}),
+    (_spec("pinocchio", "best", 1e-3), {"status": "ok", "reason": "", "main_output_error": 2e-3,
+                                        "accurate": False, "wall_time_s": 0.3,
+                                        "notes": json.dumps([LIMIT_NOTE])}),
 )
 #: Sweep rows: an explicit and an implicit method's largest stable step.
 SWEEPS = (
@@ -101,6 +108,8 @@ def test_reading_places_the_failure_at_the_passage_and_names_the_unsupported_eng
             "t = 0.714 s): inhouse best (dt 0.001: 1e-09).") in reading
     assert "never within 0.001 (ok and inaccurate, reported as such): mujoco default " \
            "(smallest error 0.03)" in reading
+    # An inaccurate method's row that names its engine's limit carries it into the reading.
+    assert f"pinocchio best (smallest error 0.002; {LIMIT_NOTE[:89]}…)" in reading
     assert f"Cannot represent the scene (unsupported): pybullet ({UNSUPPORTED_REASON})." in reading
     assert ("Largest stable step: explicit integration up to 0.00025 s (inhouse default); "
             "implicit integration up to 0.01 s (exudyn default). Explicit integration needs "
