@@ -19,7 +19,9 @@ with tuples 0.08 µs), presumably because the compiler must assume that a scratc
 q and q̇ and so reloads them after every store.  Jacobians are added straight into the rows of
 Φ_q (:func:`add_rotate_jacobian`, :func:`add_point_jacobian`, :func:`add_point_block`); the
 force kernels of :mod:`mbh._adapters.inhouse.formulations.dynamics` follow the same rule.  All are inlined into
-their callers (``inline="always"``): a call of a separately compiled function with array
+their compiled callers (numba's ``inline=`` with the cost model of
+:mod:`~mbh._adapters.inhouse.numerics.inlining`, which leaves out only a kernel Python calls by
+itself, compiled alone): a call of a separately compiled function with array
 arguments costs more than these few flops (its arguments' reference counts, atomic updates, are
 changed on entry and exit).
 
@@ -32,11 +34,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from mbh._adapters.inhouse.numerics.inlining import into_compiled_callers
+
 PLANAR_NC = 3
 SPATIAL_NC = 7
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def rotate_xyz(q, nc, body, u):
     """World vector A_b ū as a tuple (x, y, z)."""
     if body < 0:
@@ -53,7 +57,7 @@ def rotate_xyz(q, nc, body, u):
             a * u[2] + 2.0 * t3 * dot + 2.0 * t0 * (t1 * u[1] - t2 * u[0]))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _with_origin(x, y, z, coordinates, nc, body):
     """(x, y, z) plus the body's origin entries of ``coordinates`` (r_b of q, or ṙ_b of q̇);
     unchanged for the ground (body < 0)."""
@@ -65,14 +69,14 @@ def _with_origin(x, y, z, coordinates, nc, body):
     return x + coordinates[k], y + coordinates[k + 1], z
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def point_xyz(q, nc, body, u):
     """World position r_b + A_b ū of a body point as a tuple (x, y, z)  (Rouvinen 2003, eq. 1)."""
     x, y, z = rotate_xyz(q, nc, body, u)
     return _with_origin(x, y, z, q, nc, body)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _planar_rotate_column(q, k, u):
     """∂(A ū)/∂φ = Ω A ū (Frączek & Wojtyra 2009, eq. 1.19) of the planar body whose coordinates start at q[k],
     a tuple (3)."""
@@ -80,7 +84,7 @@ def _planar_rotate_column(q, k, u):
     return -s * u[0] - c * u[1], c * u[0] - s * u[1], 0.0
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _spatial_rotate_columns(q, k, u):
     """∂(A ū)/∂θ0 … ∂(A ū)/∂θ3 of the spatial body whose coordinates start at q[k], four
     tuples (3): ∂/∂θ0 = 4θ0 ū + 2 θ̄ × ū and ∂/∂θk = 2 e_k (θ̄·ū) + 2 θ̄ ū_k + 2 θ0 (e_k × ū)."""
@@ -97,7 +101,7 @@ def _spatial_rotate_columns(q, k, u):
              2.0 * t3 * u[2] + 2.0 * dot))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def add_rotate_jacobian(jac, r, q, nc, body, u, w, sign):
     """jac[r, body's columns] += sign · wᵀ ∂(A_b ū)/∂q_b, w a tuple (3); nothing for the ground
     and nothing on the translation columns."""
@@ -114,7 +118,7 @@ def add_rotate_jacobian(jac, r, q, nc, body, u, w, sign):
         jac[r, k + 3 + c] += sign * (w[0] * column[0] + w[1] * column[1] + w[2] * column[2])
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def add_point_jacobian(jac, r, q, nc, body, u, w, sign):
     """jac[r, body's columns] += sign · wᵀ ∂(r_b + A_b ū)/∂q_b, w a tuple (3)."""
     if body < 0:
@@ -127,7 +131,7 @@ def add_point_jacobian(jac, r, q, nc, body, u, w, sign):
     add_rotate_jacobian(jac, r, q, nc, body, u, w, sign)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def add_point_block(jac, r, q, nc, body, u, sign):
     """jac[r:r + d, body's columns] += sign · ∂(r_b + A_b ū)/∂q_b, the d = 2 (planar) or 3
     (spatial) rows of a body point's position."""
@@ -147,7 +151,7 @@ def add_point_block(jac, r, q, nc, body, u, sign):
             jac[r + x, k + 3 + c] += sign * columns[c][x]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def rotate_rate_xyz(q, v, nc, body, u):
     """d(A_b ū)/dt = ∂(A_b ū)/∂q_b · q̇_b as a tuple (x, y, z).
 
@@ -172,14 +176,14 @@ def rotate_rate_xyz(q, v, nc, body, u):
             + 2.0 * (d3 * dot + t3 * rate_dot + t0 * (d1 * u[1] - d2 * u[0])))
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def point_rate_xyz(q, v, nc, body, u):
     """Velocity ṙ_b + d(A_b ū)/dt of a body point as a tuple (x, y, z)."""
     x, y, z = rotate_rate_xyz(q, v, nc, body, u)
     return _with_origin(x, y, z, v, nc, body)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def rotate_quadratic_xyz(q, v, nc, body, u):
     """The part of d²(A_b ū)/dt² without q̈ as a tuple (x, y, z).
 

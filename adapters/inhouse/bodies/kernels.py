@@ -23,11 +23,11 @@ Arrays (k primitives): ``kind, bi, bj, row, driver`` int64 (k,); ``ui, uj, pi, g
 DRIVE_ROT); ``const`` float64 (k,).  The kernels take them packed, with ``nc`` first and the
 driver ``drive`` and row count ``m`` last, as one tuple ``args``
 (:attr:`~mbh._adapters.inhouse.bodies.constraints.ConstraintSystem.kernel_args`).  Φ, Φ_q and γ are inlined
-into their compiled callers (``inline="always"``): a call of a compiled function with eleven
+into their compiled callers (the cost model of :mod:`~mbh._adapters.inhouse.numerics.inlining`): a call of a compiled function with eleven
 array arguments cost ~0.13 µs (planar four-bar, one call in a compiled loop: Φ_q 0.38 → 0.25 µs,
 γ 0.32 → 0.18 µs inlined), at the price of a longer first compilation.
 
-The small helpers below are inlined into the kernels (``inline="always"``), as those of
+The small helpers below are inlined into the kernels' compiled callers, as those of
 :mod:`mbh._adapters.inhouse.bodies.bodykin` are, and for the same reason: a call of a separately compiled
 function with array arguments costs more than their arithmetic.  Like those, they pass vectors as
 tuples (x, y, z), never through scratch arrays (the module notes there say why).
@@ -49,23 +49,24 @@ from mbh._adapters.inhouse.bodies.bodykin import (
     rotate_rate_xyz,
     rotate_xyz,
 )
+from mbh._adapters.inhouse.numerics.inlining import called_from_python, into_compiled_callers
 
 POINT, DOT_VV, DOT_VD, ANGLE, NORM, DRIVE_ROT = range(6)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _drive(drive, t):
     """θ_d, θ̇_d at time t for ``drive = (value, rate)`` (linear in t, so θ̈_d = 0)."""
     return drive[0] + drive[1] * t, drive[1]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _dot(a, b):
     """aᵀb of two tuples (3)."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _second_vector(k, kind, tab_uj, tab_gj, theta):
     """The vector on body j of a DOT_VV row (ū_j) or of a DRIVE_ROT row (sin θ_d f̄_j +
     cos θ_d ḡ_j), shape (3,) (a row view of ``tab_uj`` for DOT_VV)."""
@@ -75,14 +76,15 @@ def _second_vector(k, kind, tab_uj, tab_gj, theta):
     return s * tab_uj[k] + c * tab_gj[k]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _second_vector_rate(k, tab_uj, tab_gj, theta, rate):
     """d/dt of a DRIVE_ROT row's vector on body j, θ̇_d (cos θ_d f̄_j − sin θ_d ḡ_j), shape (3,)."""
     c, s = np.cos(theta), np.sin(theta)
     return rate * (c * tab_uj[k] - s * tab_gj[k])
 
 
-@njit(cache=True, inline="always")
+@called_from_python
+@njit(cache=True, inline=into_compiled_callers)
 def phi(q, t, args):
     """Constraint residuals Φ(q, t), shape (m,)."""
     nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m = args
@@ -115,14 +117,15 @@ def phi(q, t, args):
     return out
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline=into_compiled_callers)
 def _euler_square(x, start):
     """x[start:start + 4] · x[start:start + 4] (θᵀθ or θ̇ᵀθ̇ of one body) without a BLAS call."""
     return x[start] * x[start] + x[start + 1] * x[start + 1] + x[start + 2] * x[start + 2] \
         + x[start + 3] * x[start + 3]
 
 
-@njit(cache=True, inline="always")
+@called_from_python
+@njit(cache=True, inline=into_compiled_callers)
 def jacobian(q, t, args):
     """Constraint Jacobian Φ_q(q, t), shape (m, n)."""
     nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m = args
@@ -176,7 +179,8 @@ def phi_t(q, t, args):
     return out
 
 
-@njit(cache=True, inline="always")
+@called_from_python
+@njit(cache=True, inline=into_compiled_callers)
 def gamma(q, v, t, args):
     """Acceleration right-hand side γ(q, q̇, t), shape (m,)  (Frączek & Wojtyra 2009, eq. 1.16; Rouvinen 2003, eq. 21–23)."""
     nc, kind, bi, bj, row, driver, ui, uj, pi, gj, const, drive, m = args
