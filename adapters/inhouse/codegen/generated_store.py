@@ -14,7 +14,9 @@ Layout, under :func:`mbh._harness.common.locations.generated_cache` (``$MBH_GENE
                                      at every read (last use)
 
 ``<toolchain>`` is :func:`mbh._harness.common.kernel_cache.fingerprint` of the Python, numba and
-llvmlite versions: another numba finds no entry "compiled" that it would have to compile again.
+llvmlite versions and of the code that compiles a source
+(:mod:`~mbh._adapters.inhouse.codegen.straight_line`): another numba, or another way of compiling,
+finds no entry "compiled" that it would have to compile again.
 The source's text depends on the kernels it was traced from, so a kernel change makes new names.
 
 * **Bounded.** After every new compilation the least recently used entries of the folder (every
@@ -30,6 +32,7 @@ The source's text depends on the kernels it was traced from, so a kernel change 
 from __future__ import annotations
 
 import contextlib
+import functools
 import importlib.util
 import json
 import math
@@ -40,6 +43,7 @@ import sys
 from pathlib import Path
 from types import ModuleType
 
+from mbh._adapters.inhouse.codegen import straight_line
 from mbh._harness.common import file_lock
 from mbh._harness.common.errors import MbhError
 from mbh._harness.common.kernel_cache import fingerprint
@@ -83,9 +87,15 @@ def max_bytes() -> int:
     return int(megabytes * 10**6)
 
 
+@functools.cache
+def toolchain() -> str:
+    """This toolchain's folder name (see the module notes)."""
+    return fingerprint([Path(straight_line.__file__)])
+
+
 def entry_folder(name: str) -> Path:
     """The folder of entry ``name`` for this toolchain."""
-    return generated_cache() / fingerprint() / name
+    return generated_cache() / toolchain() / name
 
 
 def is_compiled(name: str) -> bool:
@@ -102,7 +112,7 @@ def entry_source(name: str) -> str | None:
 
 
 def _trace_path(key: str) -> Path:
-    return generated_cache() / fingerprint() / f"{key}.trace"
+    return generated_cache() / toolchain() / f"{key}.trace"
 
 
 def remembered(key: str) -> dict | None:
