@@ -13,6 +13,7 @@ from mbh._adapters.base import Adapter, MethodSpec, RunGrid, Stepper
 from mbh._adapters.pybullet_adapter.build import PybulletModel, build_model
 from mbh._adapters.pybullet_adapter.loads import _loaded_steps
 from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._adapters.pybullet_adapter.redundancy import redundancy_notes
 from mbh._adapters.pybullet_adapter.state import _read_states
 from mbh._adapters.pybullet_adapter.world import bullet_world
 from mbh._harness.model.mechanism import Mechanism
@@ -72,11 +73,11 @@ class _BulletStepper(Stepper):
     def __init__(self, model: PybulletModel, params: dict, grid: RunGrid):
         super().__init__()
         self.model, self.grid = model, grid
-        self.notes = [*model.notes, ORDER_NOTE]
         self.substeps = max(1, int(params["numSubSteps"]))
         self.limit = _DIVERGED_SCALE * max(model.size, 1.0)
         with contextlib.ExitStack() as stack:
             world = stack.enter_context(bullet_world(model, params, grid.dt))
+            self.notes = [*redundancy_notes(model, world), *model.notes, ORDER_NOTE]
             self._exit = stack.pop_all()  # the world stays open until close()
         self.uid, self.client = world.body, world.client
         self.take_steps = _loaded_steps(model, self.uid, self.client)

@@ -208,9 +208,7 @@ def _check_cuts(mech: Mechanism, tree: SpanningTree) -> None:
 
 
 def _notes(mech: Mechanism, tree: SpanningTree) -> tuple[str, ...]:
-    notes = []
-    if tree.redundant_closure_equations > 0:
-        notes.append(f"{tree.redundant_closure_equations} redundant closure equation(s)")
+    notes = []  # the redundant closure equations are counted at the start (redundancy.py)
     for name in tree.tree_joints:
         kind = mech.joint(name).type
         if kind == "universal":

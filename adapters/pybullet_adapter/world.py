@@ -110,7 +110,7 @@ def _make_faithful(model: PybulletModel, uid: int, client: int) -> None:
                             physicsClientId=client)
 
 
-def _pivot(model: PybulletModel, body: int, local: np.ndarray) -> list[float]:
+def pivot(model: PybulletModel, body: int, local: np.ndarray) -> list[float]:
     """A body-frame point in the centre-of-mass (principal) frame Bullet's pivots use."""
     return list(local) if body < 0 else list(model.principal[body].T @ local)
 
@@ -126,7 +126,7 @@ def _add_cut_constraints(model: PybulletModel, uid: int, client: int) -> list[in
         link2 = -1 if cut.body2 < 0 else model.body_links[cut.body2]
         cid = pybullet.createConstraint(
             uid, link1, uid, link2, pybullet.JOINT_POINT2POINT, [0.0, 0.0, 0.0],
-            _pivot(model, cut.body1, cut.joint.point1), _pivot(model, cut.body2, cut.joint.point2),
+            pivot(model, cut.body1, cut.joint.point1), pivot(model, cut.body2, cut.joint.point2),
             physicsClientId=client)
         pybullet.changeConstraint(cid, maxForce=_HUGE, physicsClientId=client)
         ids.append(cid)

@@ -1,0 +1,71 @@
+"""How many of a Bullet model's loop-closure equations are redundant, counted by the engine.
+
+A cut joint is closed by a point-to-point constraint (3 rows).  Some rows are redundant by the
+closure model alone (a planar revolute closed by a 3-D point: ``tree.redundant_closure_equations``),
+but an overconstrained mechanism makes more of them dependent (an R-S-R-R four-bar closed at its
+spherical joint: 3 rows on a 3-coordinate tree of mobility 1).  The adapter may not use the
+harness's rank analysis; it counts with Bullet's own kinematics: the closure Jacobian at the
+start, each cut's rows the difference of ``pybullet.calculateJacobian``'s linear part at its two
+pivots, and its rank by the singular values above :data:`RANK_RTOL` · σ_max.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mbh._adapters.pybullet_adapter.build import PybulletModel
+from mbh._adapters.pybullet_adapter.quiet import pybullet
+from mbh._adapters.pybullet_adapter.world import BulletWorld, pivot
+
+#: Singular values of the closure Jacobian below this fraction of the largest count as zero
+#: (measured at the start: the R-S-R-R four-bar's are 3.05, 1.53 and 0 to round-off; the seed
+#: four-bar's, closed by a 3-D point, the same).
+RANK_RTOL = 1e-9
+
+
+def closure_jacobian(model: PybulletModel, world: BulletWorld) -> np.ndarray | None:
+    """∂(pivot₁ − pivot₂)/∂(joint positions) of every cut at the world's present state, shape
+    (3 · cuts, movable joints); None where a tree joint is spherical (its position is a
+    quaternion, which ``calculateJacobian``'s joint-position list does not take)."""
+    client, body = world.client, world.body
+    kinds = [pybullet.getJointInfo(body, j, physicsClientId=client)[2]
+             for j in range(pybullet.getNumJoints(body, physicsClientId=client))]
+    if pybullet.JOINT_SPHERICAL in kinds:
+        return None
+    movable = [j for j, kind in enumerate(kinds) if kind != pybullet.JOINT_FIXED]
+    positions = [pybullet.getJointState(body, j, physicsClientId=client)[0] for j in movable]
+    zeros = [0.0] * len(positions)
+    rows = []
+    for cut in model.cuts:
+        ends = []
+        for part, point in ((cut.body1, cut.joint.point1), (cut.body2, cut.joint.point2)):
+            if part < 0:  # ground
+                ends.append(np.zeros((3, len(positions))))
+                continue
+            linear, _ = pybullet.calculateJacobian(body, model.body_links[part],
+                                                   pivot(model, part, point), positions, zeros,
+                                                   zeros, physicsClientId=client)
+            ends.append(np.array(linear, dtype=float).reshape(3, len(positions)))
+        rows.append(ends[0] - ends[1])
+    return np.vstack(rows) if rows else np.zeros((0, len(positions)))
+
+
+def redundancy_notes(model: PybulletModel, world: BulletWorld) -> list[str]:
+    """The note counting the redundant closure equations at the world's state (the start):
+    the mechanism's and the closure model's; none when no row is redundant."""
+    of_model = model.tree.redundant_closure_equations
+    jacobian = closure_jacobian(model, world)
+    if jacobian is None:
+        return ([f"{of_model} redundant closure equation(s) of the closure model (the "
+                 f"mechanism's own not counted: a spherical tree joint)"] if of_model else [])
+    if jacobian.shape[0] == 0:
+        return []
+    sigma = np.linalg.svd(jacobian, compute_uv=False)
+    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma.size and sigma[0] > 0 \
+        else 0
+    redundant = jacobian.shape[0] - rank
+    if redundant == 0:
+        return []
+    return [f"{redundant} redundant closure equation(s) of {jacobian.shape[0]} (rank {rank} at "
+            f"the start): {redundant - of_model} of the mechanism, {of_model} of the closure "
+            f"model"]
