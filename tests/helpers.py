@@ -169,23 +169,29 @@ def example_suite_files() -> dict[str, str]:
     return page_files(EXAMPLE_PAGE, EXAMPLE_SECTION)
 
 
-def parallel_revolute_fourbar():
-    """The seed four-bar's file drawn in space with four revolutes about z: three redundant
-    equations (the two tilts of two joints)."""
-    fourbar = tomllib.loads((SCENARIO_DIR / "fourbar.toml").read_text(encoding="utf-8"))
-    builder = mbh.MechanismBuilder("fourbar_4r", kind="spatial", duration=1.0,
-                                   gravity=fourbar["gravity"])
-    for body in fourbar["bodies"]:
+def planar_scene_in_space(scene: str, name: str, driver: str, duration: float = 1.0):
+    """Shipped planar scene ``scene`` drawn in space with a revolute about z at every joint
+    (its bodies and joint locations as in its file, its ``driver`` joint driven from rest)."""
+    document = tomllib.loads((SCENARIO_DIR / f"{scene}.toml").read_text(encoding="utf-8"))
+    builder = mbh.MechanismBuilder(name, kind="spatial", duration=duration,
+                                   gravity=document["gravity"])
+    for body in document["bodies"]:
         half = math.radians(body["angle_deg"]) / 2.0
         builder = builder.body(body["name"], mass=body["mass"], inertia=body["inertia"],
                                position=body["position"],
                                quaternion=[math.cos(half), 0.0, 0.0, math.sin(half)])
-    for joint in fourbar["joints"]:
+    for joint in document["joints"]:
         builder = builder.joint(joint["name"], "revolute", body1=joint["body1"],
                                 body2=joint["body2"], location=joint["location"],
                                 axis=[0.0, 0.0, 1.0])
-    return (builder.initial(driver="O", value=0.0, rate=0.0)
-            .output("crank_angle", "joint_angle", joint="O").build())
+    return (builder.initial(driver=driver, value=0.0, rate=0.0)
+            .output("crank_angle", "joint_angle", joint=driver).build())
+
+
+def parallel_revolute_fourbar():
+    """The seed four-bar's file drawn in space with four revolutes about z: three redundant
+    equations (the two tilts of two joints)."""
+    return planar_scene_in_space("fourbar", "fourbar_4r", "O")
 
 
 def bennett_linkage(crank_angle: float = 0.8, a: float = 1.0, b: float = 1.5,
@@ -258,21 +264,7 @@ def flat_parallelogram(duration: float = 0.4):
     """The shipped parallelogram four-bar's rods (principal moment 0 about their length: flat
     bodies) drawn in space with four revolutes about z: three redundant equations.  Over 0.4 s,
     before its flattened passage at 0.54 s."""
-    document = tomllib.loads((SCENARIO_DIR / "parallelogram_fourbar.toml").read_text(
-        encoding="utf-8"))
-    builder = mbh.MechanismBuilder("flat_parallelogram", kind="spatial", duration=duration,
-                                   gravity=document["gravity"])
-    for body in document["bodies"]:
-        half = math.radians(body["angle_deg"]) / 2.0
-        builder = builder.body(body["name"], mass=body["mass"], inertia=body["inertia"],
-                               position=body["position"],
-                               quaternion=[math.cos(half), 0.0, 0.0, math.sin(half)])
-    for joint in document["joints"]:
-        builder = builder.joint(joint["name"], "revolute", body1=joint["body1"],
-                                body2=joint["body2"], location=joint["location"],
-                                axis=[0.0, 0.0, 1.0])
-    return (builder.initial(driver="O1", value=0.0, rate=0.0)
-            .output("crank_angle", "joint_angle", joint="O1").build())
+    return planar_scene_in_space("parallelogram_fourbar", "flat_parallelogram", "O1", duration)
 
 
 def rsrr_fourbar():
