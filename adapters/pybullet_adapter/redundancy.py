@@ -23,15 +23,29 @@ from mbh._adapters.pybullet_adapter.world import BulletWorld, pivot
 RANK_RTOL = 1e-9
 
 
-def closure_jacobian(model: PybulletModel, world: BulletWorld) -> np.ndarray | None:
+class NotCounted(Exception):
+    """Bullet's kinematics cannot give the closure Jacobian of this model (the reason)."""
+
+
+def closure_jacobian(model: PybulletModel, world: BulletWorld) -> np.ndarray:
     """∂(pivot₁ − pivot₂)/∂(joint positions) of every cut at the world's present state, shape
-    (3 · cuts, movable joints); None where a tree joint is spherical (its position is a
-    quaternion, which ``calculateJacobian``'s joint-position list does not take)."""
+    (3 · cuts, movable joints).
+
+    Raises
+    ------
+    NotCounted
+        Where a tree joint is spherical (its position is a quaternion, which
+        ``calculateJacobian``'s joint-position list does not take), or where ``calculateJacobian``
+        refuses the model: it builds Bullet's inverse-dynamics tree, which checks the links'
+        inertias, and a flat body's principal moment that comes out −1e-17 instead of 0 fails
+        that check (found on drawn planar four-bars with slender couplers), although stepping
+        accepts it.
+    """
     client, body = world.client, world.body
     kinds = [pybullet.getJointInfo(body, j, physicsClientId=client)[2]
              for j in range(pybullet.getNumJoints(body, physicsClientId=client))]
     if pybullet.JOINT_SPHERICAL in kinds:
-        return None
+        raise NotCounted("a spherical tree joint")
     movable = [j for j, kind in enumerate(kinds) if kind != pybullet.JOINT_FIXED]
     positions = [pybullet.getJointState(body, j, physicsClientId=client)[0] for j in movable]
     zeros = [0.0] * len(positions)
@@ -42,9 +56,14 @@ def closure_jacobian(model: PybulletModel, world: BulletWorld) -> np.ndarray | N
             if part < 0:  # ground
                 ends.append(np.zeros((3, len(positions))))
                 continue
-            linear, _ = pybullet.calculateJacobian(body, model.body_links[part],
-                                                   pivot(model, part, point), positions, zeros,
-                                                   zeros, physicsClientId=client)
+            try:
+                linear, _ = pybullet.calculateJacobian(body, model.body_links[part],
+                                                       pivot(model, part, point), positions,
+                                                       zeros, zeros, physicsClientId=client)
+            except (SystemError, pybullet.error) as error:
+                cause = error.__cause__ or error.__context__ or error  # pybullet's own message
+                raise NotCounted(f"pybullet.calculateJacobian refused the model: {cause}") \
+                    from None
             ends.append(np.array(linear, dtype=float).reshape(3, len(positions)))
         rows.append(ends[0] - ends[1])
     return np.vstack(rows) if rows else np.zeros((0, len(positions)))
@@ -54,10 +73,11 @@ def redundancy_notes(model: PybulletModel, world: BulletWorld) -> list[str]:
     """The note counting the redundant closure equations at the world's state (the start):
     the mechanism's and the closure model's; none when no row is redundant."""
     of_model = model.tree.redundant_closure_equations
-    jacobian = closure_jacobian(model, world)
-    if jacobian is None:
-        return ([f"{of_model} redundant closure equation(s) of the closure model (the "
-                 f"mechanism's own not counted: a spherical tree joint)"] if of_model else [])
+    try:
+        jacobian = closure_jacobian(model, world)
+    except NotCounted as why:
+        return [f"{of_model} redundant closure equation(s) of the closure model (the "
+                f"mechanism's own not counted: {why})"] if model.cuts else []
     if jacobian.shape[0] == 0:
         return []
     sigma = np.linalg.svd(jacobian, compute_uv=False)

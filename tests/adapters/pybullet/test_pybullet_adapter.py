@@ -104,6 +104,21 @@ def test_build_every_shipped_scenario(scenario):
         assert any(expected in note for note in notes), notes
 
 
+def test_a_closure_jacobian_bullet_refuses_leaves_the_closure_models_count(monkeypatch):
+    """Bullet's calculateJacobian checks the links' inertias (a flat body's moment of −1e-17
+    fails it on drawn four-bars, where stepping runs): the run goes on, and its note says what was
+    not counted and why."""
+    def refuse(*args, **kwargs):
+        raise pybullet.error("invalid inertia")
+
+    monkeypatch.setattr(pybullet, "calculateJacobian", refuse)
+    notes = ADAPTER.simulate(ADAPTER.build(load("fourbar")), "default", 1e-3, 2e-3,
+                             np.array([0.0, 2e-3])).notes
+    assert notes[0] == ("1 redundant closure equation(s) of the closure model (the mechanism's "
+                        "own not counted: pybullet.calculateJacobian refused the model: invalid "
+                        "inertia)")
+
+
 def test_the_mechanisms_own_redundant_equations_are_counted():
     """An R-S-R-R four-bar closed at its spherical joint: 3 closure rows on a tree of three
     revolutes, mobility 1, so 1 row is redundant by the mechanism and none by the closure
