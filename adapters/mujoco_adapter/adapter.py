@@ -11,6 +11,7 @@ import xml.etree.ElementTree as ElementTree
 import mujoco
 import numpy as np
 
+from mbh._adapters import closure_notes
 from mbh._adapters.base import Adapter, MethodSpec, RunFailure, RunGrid, Stepper
 from mbh._adapters.mujoco_adapter.build import MujocoModel, build_model
 from mbh._adapters.mujoco_adapter.methods import STAGES, _check_params, _configured, _method_specs
@@ -28,29 +29,24 @@ from mbh._harness.model.trajectory import BodyStates, Trajectory
 RANK_RTOL = 1e-10
 
 
-def _notes(built: MujocoModel, model: mujoco.MjModel, rows: int, rank: int) -> list[str]:
-    """Facts a reader of a run must know; ``rows`` and ``rank`` are the equality rows and the
-    rank of their Jacobian at the start (:func:`_equality_rank`)."""
+def _notes(built: MujocoModel, equality_jacobian: np.ndarray) -> list[str]:
+    """Facts a reader of a run must know; ``equality_jacobian`` is that of the equality rows at
+    the start (:func:`_equality_jacobian`), whose redundant rows are counted
+    (:func:`mbh._adapters.closure_notes.redundancy_notes`)."""
     notes = list(built.notes)
-    redundant = rows - rank
-    if redundant > 0:
-        of_model = built.tree.redundant_closure_equations
-        notes.append(f"{redundant} redundant closure equation(s) of {rows} (rank {rank} at the "
-                     f"start): {redundant - of_model} of the mechanism, {of_model} of the "
-                     f"closure model")
+    notes += closure_notes.redundancy_notes(equality_jacobian,
+                                            built.tree.redundant_closure_equations, RANK_RTOL)
     if built.loads.moving:
         notes.append("pose-dependent loads (cut-joint actuation, off-centre forces) are "
                      "recomputed once per step and held constant within it")
     return notes
 
 
-def _equality_rank(built: MujocoModel, model: mujoco.MjModel, data: mujoco.MjData) -> tuple:
-    """The equality rows MuJoCo builds at ``data``'s state and the rank of their Jacobian
-    (``efc_J``, singular values above :data:`RANK_RTOL` · σ_max), from a scratch copy of the
-    data so the run's own is untouched.  The count includes the mechanism's redundancy (an
-    overconstrained loop), not only the closure model's (a planar revolute closed by a point)."""
+def _equality_jacobian(model: mujoco.MjModel, data: mujoco.MjData) -> np.ndarray:
+    """The Jacobian (``efc_J``) of the equality rows MuJoCo builds at ``data``'s state, shape
+    (rows, nv), from a scratch copy of the data so the run's own is untouched."""
     if not model.neq:
-        return 0, 0
+        return np.zeros((0, model.nv))
     probe = mujoco.MjData(model)
     probe.qpos[:], probe.qvel[:] = data.qpos, data.qvel
     mujoco.mj_forward(model, probe)
@@ -61,12 +57,7 @@ def _equality_rank(built: MujocoModel, model: mujoco.MjModel, data: mujoco.MjDat
                                 probe.efc_J_colind)
     else:
         jacobian = probe.efc_J.reshape(probe.nefc, model.nv)
-    jacobian = jacobian[rows]
-    if not len(jacobian):
-        return 0, 0
-    sigma = np.linalg.svd(jacobian, compute_uv=False)
-    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma[0] > 0.0 else 0
-    return int(jacobian.shape[0]), rank
+    return jacobian[rows]
 
 
 def _softness_notes(model: mujoco.MjModel, residual: float) -> list[str]:
@@ -159,7 +150,7 @@ class _MujocoStepper(Stepper):
         self.stages = STAGES[params["integrator"]]
         self._previous = _set_start(built, self.model, self.data,
                                     initial_state(built.mechanism)).quaternion
-        self.notes = _notes(built, self.model, *_equality_rank(built, self.model, self.data))
+        self.notes = _notes(built, _equality_jacobian(self.model, self.data))
         self.stepping = Stepping(self.model, self.data, built.loads)
         self._residual = 0.0  # the largest equality residual at the samples, m
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 import pinocchio as pin
 
+from mbh._adapters import closure_notes
 from mbh._adapters.integrators.base import StepFailure
 from mbh._adapters.pinocchio_adapter.build import PinocchioModel
 from mbh._adapters.pinocchio_adapter.state import frame_jacobian
@@ -292,34 +293,15 @@ def pseudo_inverse(jacobian: np.ndarray) -> np.ndarray:
 
 
 def redundancy_notes(problem: ConstrainedProblem, q: np.ndarray) -> list[str]:
-    """The note counting the redundant closure equations at an assembled configuration ``q``.
-
-    The closure model's own excess (``tree.redundant_closure_equations``: a planar revolute
-    closed by a 3-D point, a spatial revolute by two) is not the whole count: an overconstrained
-    loop (Bennett's 4R, Bricard's 6R, parallel revolutes drawn in space) makes more rows
-    dependent.  The adapter may not use the harness's rank analysis, so it counts with its own:
-    the rank of the closure Jacobian it builds (:meth:`ConstrainedProblem.closure`), singular
-    values above :data:`RANK_RTOL` · σ_max, as its projection does.  The mechanism's count is the
-    rows beyond the rank less the closure model's excess.  At a singular position the rank drops
-    further and the count includes it; ``q`` should be the assembled start.
-
-    Returns
-    -------
-    list of str
-        One note when rows are redundant, none otherwise.
-    """
+    """The note counting the redundant closure equations at an assembled configuration ``q``
+    (:func:`mbh._adapters.closure_notes.redundancy_notes`), from the closure Jacobian the adapter
+    builds (:meth:`ConstrainedProblem.closure`) and the rank cut its projection uses
+    (:data:`RANK_RTOL`); ``q`` should be the assembled start."""
     if not problem.constraints:
         return []
     _, jacobian = problem.uncounted_closure(q)
-    sigma = np.linalg.svd(jacobian, compute_uv=False)
-    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma[0] > 0.0 else 0
-    redundant = jacobian.shape[0] - rank
-    if redundant == 0:
-        return []
-    of_model = problem.pm.tree.redundant_closure_equations
-    return [f"{redundant} redundant closure equation(s) of {jacobian.shape[0]} (rank "
-            f"{rank} at the start): {redundant - of_model} of the mechanism, {of_model} of "
-            f"the closure model"]
+    return closure_notes.redundancy_notes(jacobian, problem.pm.tree.redundant_closure_equations,
+                                          RANK_RTOL)
 
 
 def proximal_notes(problem: ConstrainedProblem) -> list[str]:

@@ -1,18 +1,16 @@
-"""How many of a Bullet model's loop-closure equations are redundant, counted by the engine.
-
-A cut joint is closed by a point-to-point constraint (3 rows).  Some rows are redundant by the
-closure model alone (a planar revolute closed by a 3-D point: ``tree.redundant_closure_equations``),
-but an overconstrained mechanism makes more of them dependent (an R-S-R-R four-bar closed at its
-spherical joint: 3 rows on a 3-coordinate tree of mobility 1).  The adapter may not use the
-harness's rank analysis; it counts with Bullet's own kinematics: the closure Jacobian at the
-start, each cut's rows the difference of ``pybullet.calculateJacobian``'s linear part at its two
-pivots, and its rank by the singular values above :data:`RANK_RTOL` · σ_max.
+"""How many of a Bullet model's loop-closure equations are redundant, counted by the engine's
+own kinematics: the closure Jacobian at the start, each cut's rows (a point-to-point constraint,
+3) the difference of ``pybullet.calculateJacobian``'s linear part at its two pivots, counted by
+:func:`mbh._adapters.closure_notes.redundancy_notes` with the cut :data:`RANK_RTOL`.  (An
+R-S-R-R four-bar closed at its spherical joint: 3 rows on a 3-coordinate tree of mobility 1, one
+redundant by the mechanism and none by the closure model.)
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from mbh._adapters import closure_notes
 from mbh._adapters.pybullet_adapter.build import PybulletModel
 from mbh._adapters.pybullet_adapter.quiet import pybullet
 from mbh._adapters.pybullet_adapter.world import BulletWorld, pivot
@@ -78,14 +76,4 @@ def redundancy_notes(model: PybulletModel, world: BulletWorld) -> list[str]:
     except NotCounted as why:
         return [f"{of_model} redundant closure equation(s) of the closure model (the "
                 f"mechanism's own not counted: {why})"] if model.cuts else []
-    if jacobian.shape[0] == 0:
-        return []
-    sigma = np.linalg.svd(jacobian, compute_uv=False)
-    rank = int(np.count_nonzero(sigma > RANK_RTOL * sigma[0])) if sigma.size and sigma[0] > 0 \
-        else 0
-    redundant = jacobian.shape[0] - rank
-    if redundant == 0:
-        return []
-    return [f"{redundant} redundant closure equation(s) of {jacobian.shape[0]} (rank {rank} at "
-            f"the start): {redundant - of_model} of the mechanism, {of_model} of the closure "
-            f"model"]
+    return closure_notes.redundancy_notes(jacobian, of_model, RANK_RTOL)
