@@ -89,7 +89,7 @@ def test_a_compiled_call_returns_the_python_result_to_the_bit(tmp_path):
 
 @pytest.mark.parametrize("statement", ["x1 = x0 ** 2.0", "while x0 > 0.0: x0 = x0 - 1.0",
                                        "x1 = np.exp(x0)", "x1 = q[x0]"])
-def test_a_statement_outside_the_form_is_refused_with_its_line(tmp_path, statement):
+def test_a_statement_outside_the_form_is_refused_with_its_file_and_line(tmp_path, statement):
     source = textwrap.dedent(f'''
         import numpy as np
 
@@ -105,4 +105,4 @@ def test_a_statement_outside_the_form_is_refused_with_its_line(tmp_path, stateme
     with pytest.raises(Exception) as raised:
         cfunc(SIGNATURE)(lambda q, v, t, out: module.g(q, v, t, out))
     assert isinstance(raised.value, NotStraightLine) or "NotStraightLine" in str(raised.value)
-    assert "line 7" in str(raised.value)
+    assert f"{module.__file__}, line 7: " in str(raised.value)  # the file and line of the source
