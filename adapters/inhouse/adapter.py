@@ -11,6 +11,9 @@ the mechanism (``loop=auto``, the default, or ``generated``;
 :mod:`mbh._adapters.inhouse.stepping.compiled_stepper`), with the generic kernels (``loop=compiled``) or
 stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
 methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`).
+``none``, ``baumgarte`` and ``direct`` also take ``coords=joint``: the same treatment in the
+spanning tree's joint coordinates (:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`),
+on the Python loop.
 """
 
 from __future__ import annotations

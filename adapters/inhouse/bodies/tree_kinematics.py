@@ -20,8 +20,8 @@ bodies' origins.  The bias (the accelerations at θ̈ = 0, Ḃθ̇) follows the 
 Euler parameters: ė = ½ L(e) ω with L(e) = [−ēᵀ; e₀I − [ē]×] ((0, ω) ⊗ e, world ω), so
 B_e = ½ L(e) J_ω and the bias ë = ½ L(e) α − ¼|ω|² e.  Planar: φ̇ = ω_z, the bias φ̈ = α_z; φ is
 carried as a sum of angles (never read back from a matrix), so it does not wrap.  Every column of
-B is analytic; :func:`tests.adapters.inhouse.test_joint_coordinates` checks B against central
-differences of g.
+B is analytic (tests/adapters/inhouse/test_joint_coordinates.py checks B and Ḃθ̇ against central
+differences of g).
 """
 
 from __future__ import annotations
