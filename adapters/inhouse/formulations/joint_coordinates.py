@@ -166,7 +166,9 @@ class JointCoordinates(SecondOrderSystem):
                 f"), {self.closure.m} closure equation(s)")
         if self.closure.m:
             what += f" at cut joint(s) {', '.join(tree.cut_joints)} of rank {self.rank}"
-        if self.redundant:
+        if not self.redundant:
+            what += ", 0 redundant"
+        else:
             what += (f", {len(self.redundant)} redundant ({', '.join(self.redundant)}): kept, the "
                      "solves are rank-revealing (certified Cholesky, else the truncated SVD)")
         if self.closure.m and self.params.get("passage"):
