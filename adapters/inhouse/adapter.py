@@ -11,6 +11,9 @@ the mechanism (``loop=auto``, the default, or ``generated``;
 :mod:`mbh._adapters.inhouse.stepping.compiled_stepper`), with the generic kernels (``loop=compiled``) or
 stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
 methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`).
+``none``, ``baumgarte`` and ``direct`` also take ``coords=joint``: the same treatment in the
+spanning tree's joint coordinates (:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`),
+on the Python loop.
 """
 
 from __future__ import annotations
@@ -24,7 +27,9 @@ from mbh._adapters.base import Adapter, MethodSpec, RunGrid, Stepper, Unsupporte
 from mbh._adapters.inhouse.stepping.compiled_stepper import (
     LOOPS, CompiledStepper, has_compiled_path)
 from mbh._adapters.inhouse.stepping.driver import InhouseStepper
+from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
 from mbh._adapters.integrators import integrator_class, integrator_names, integrator_params
+from mbh._adapters.inhouse.formulations.joint_coordinates import COORDINATES, JOINT_TREATMENTS
 from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
 from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
 from mbh._adapters.inhouse.formulations.stabilisation import STRATEGIES
@@ -59,12 +64,18 @@ def _split(name: str) -> tuple[str, str]:
 def _spec(integrator: str, strategy: str) -> MethodSpec:
     """The method ``integrator+strategy`` with the parameters of both parts; methods with a
     compiled path add ``loop`` (:data:`~mbh._adapters.inhouse.stepping.compiled_stepper.LOOPS`: ``auto``, the
-    default, ``generated``, ``compiled`` or ``python``)."""
+    default, ``generated``, ``compiled`` or ``python``), treatments that also run in joint
+    coordinates add ``coords`` (:data:`~mbh._adapters.inhouse.formulations.joint_coordinates.
+    COORDINATES`: ``absolute``, the default, or ``joint``)."""
     formulation = FORMULATIONS[strategy]
     params = {**integrator_params(integrator), **formulation.defaults}
+    description = formulation.description
     if has_compiled_path(integrator, strategy):
         params["loop"] = LOOPS[0]
-    return MethodSpec(f"{integrator}+{strategy}", formulation.description, params)
+    if strategy in JOINT_TREATMENTS:
+        params["coords"] = COORDINATES[0]
+        description += "; coords=joint: in the spanning tree's joint coordinates (Python loop)"
+    return MethodSpec(f"{integrator}+{strategy}", description, params)
 
 
 class InhouseAdapter(Adapter):
@@ -123,6 +134,14 @@ class InhouseAdapter(Adapter):
         if params.get("loop", LOOPS[0]) not in LOOPS:
             raise ValueError(f"parameter 'loop' of {spec.name!r} must be one of "
                              f"{', '.join(LOOPS)}, got {params['loop']!r}")
+        coords = params.get("coords", COORDINATES[0])
+        if coords not in COORDINATES:
+            raise ValueError(f"parameter 'coords' of {spec.name!r} must be one of "
+                             f"{', '.join(COORDINATES)}, got {coords!r}")
+        if coords == "joint" and params.get("loop", "python") not in ("auto", "python"):
+            raise ValueError(f"parameter 'coords' of {spec.name!r}: coords=joint runs on the "
+                             f"Python loop only (loop=auto or loop=python), got "
+                             f"loop={params['loop']}")
         if spec.name == "ida":
             from mbh._adapters.inhouse.formulations.dae import check_ida_params
             check_ida_params(params)
@@ -131,7 +150,7 @@ class InhouseAdapter(Adapter):
         """The compiled loop alone: ``n_steps`` steps in one call (methods on the compiled path;
         the Python path, ``loop=python``, has no loop apart from the adapter's)."""
         spec, params = self.method_spec(method)
-        if params.get("loop", "python") == "python":
+        if params.get("loop", "python") == "python" or params.get("coords") == "joint":
             raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
                                   "the adapter's")
         stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
@@ -146,16 +165,31 @@ class InhouseAdapter(Adapter):
         if spec.name == "ida":
             return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)
+        if params.get("coords") == "joint":
+            return self._start_joint(model, integrator, strategy, params, grid)
         formulation = FORMULATIONS[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
             raise UnsupportedCase(reason)
         own = {k: v for k, v in params.items() if k in formulation.defaults}
-        rest = {k: v for k, v in params.items() if k not in formulation.defaults and k != "loop"}
+        rest = {k: v for k, v in params.items()
+                if k not in formulation.defaults and k not in ("loop", "coords")}
         loop = params.get("loop", "python")
         if loop == "python":
             return InhouseStepper(model, formulation, integrator, rest, own, grid)
         return CompiledStepper(model, formulation, integrator, rest, own, grid, loop)
+
+    def _start_joint(self, model: Mechanism, integrator: str, strategy: str, params: dict,
+                     grid: RunGrid) -> Stepper:
+        """The Python loop over the joint-coordinate model (``coords=joint``)."""
+        formulation = JOINT_TREATMENTS[strategy]
+        reason = formulation.unsupported_reason(model, integrator_class(integrator))
+        if reason:
+            raise UnsupportedCase(reason)
+        own = {k: v for k, v in params.items() if k in formulation.defaults}
+        rest = {k: v for k, v in params.items()
+                if k not in formulation.defaults and k not in ("loop", "coords")}
+        return JointStepper(model, formulation, integrator, rest, own, grid)
 
 
 class _IdaStepper(Stepper):

@@ -1,0 +1,29 @@
+"""The in-house stepper in joint coordinates (``coords=joint``): the Python loop of
+:class:`~mbh._adapters.inhouse.stepping.driver.InhouseStepper` over (θ, θ̇) of
+:class:`~mbh._adapters.inhouse.formulations.joint_coordinates.JointCoordinates`, whose
+``reduce``/``expand`` map the common start to θ and every read state back to the absolute body
+states the harness measures.
+
+The one difference: an adaptive method's dense output between the steps of a correcting
+treatment (``direct``) is projected onto the closure in θ (the treatment's own projection), not in
+absolute coordinates, and then expanded.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from mbh._adapters.inhouse.stepping.driver import InhouseStepper
+
+
+class JointStepper(InhouseStepper):
+    """One run in joint coordinates (parameters as :class:`InhouseStepper`)."""
+
+    def _coordinates(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        integrator = self.integrator
+        if self.steps == 0 or not self._adaptive or t == integrator.t:
+            return super()._coordinates(t)
+        theta, rate = integrator.dense(t)
+        if self._project_samples:
+            theta, rate = self.formulation.carried(t, theta, rate)
+        return self.formulation.expand(t, theta, rate)
