@@ -165,9 +165,8 @@ class InhouseAdapter(Adapter):
         if spec.name == "ida":
             return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)
-        if params.get("coords") == "joint":
-            return self._start_joint(model, integrator, strategy, params, grid)
-        formulation = FORMULATIONS[strategy]
+        joint = params.get("coords") == "joint"
+        formulation = (JOINT_TREATMENTS if joint else FORMULATIONS)[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
             raise UnsupportedCase(reason)
@@ -175,21 +174,11 @@ class InhouseAdapter(Adapter):
         rest = {k: v for k, v in params.items()
                 if k not in formulation.defaults and k not in ("loop", "coords")}
         loop = params.get("loop", "python")
+        if joint:  # the Python loop over the joint-coordinate model
+            return JointStepper(model, formulation, integrator, rest, own, grid)
         if loop == "python":
             return InhouseStepper(model, formulation, integrator, rest, own, grid)
         return CompiledStepper(model, formulation, integrator, rest, own, grid, loop)
-
-    def _start_joint(self, model: Mechanism, integrator: str, strategy: str, params: dict,
-                     grid: RunGrid) -> Stepper:
-        """The Python loop over the joint-coordinate model (``coords=joint``)."""
-        formulation = JOINT_TREATMENTS[strategy]
-        reason = formulation.unsupported_reason(model, integrator_class(integrator))
-        if reason:
-            raise UnsupportedCase(reason)
-        own = {k: v for k, v in params.items() if k in formulation.defaults}
-        rest = {k: v for k, v in params.items()
-                if k not in formulation.defaults and k not in ("loop", "coords")}
-        return JointStepper(model, formulation, integrator, rest, own, grid)
 
 
 class _IdaStepper(Stepper):
