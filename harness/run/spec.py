@@ -177,10 +177,11 @@ def campaign_names() -> list[str]:
     return sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
 
 
-def main_output(mech: Mechanism) -> str:
+def main_output(mech: Mechanism) -> str | None:
     """Name of the scenario's main output: its first declared output (the crank angle of the
-    shipped linkages, the crank tip's x of ``double_fourbar``), rad or m."""
-    return mech.outputs[0].name
+    shipped linkages, the crank tip's x of ``double_fourbar``), rad or m; None for a mechanism
+    that declares none (a run then has no main-output error, its other metrics stand)."""
+    return mech.outputs[0].name if mech.outputs else None
 
 
 def load_campaign(name_or_path: str | Path, adapters=()) -> Campaign:

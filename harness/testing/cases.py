@@ -205,9 +205,17 @@ class SessionCase:
         """``case fourbar-mujoco-best-dt1e-3 (t_end 0.5 s, status ok)``."""
         return f"case {self.label} (t_end {self.spec.t_end:g} s, status {self.status})"
 
+    def _output_name(self, name: str | None) -> str:
+        """``name``, else the main output; a mechanism without outputs must be given one."""
+        name = name or main_output(self.mechanism)
+        if name is None:
+            raise ToleranceError(f"{self.describe()}: scenario {self.spec.scenario} declares no "
+                                 "outputs, so there is no main output to compare: declare one")
+        return name
+
     def output(self, name: str | None = None) -> tuple[np.ndarray, np.ndarray]:
         """(sample times in s, output values) of output ``name`` (default the main output)."""
-        name = name or main_output(self.mechanism)
+        name = self._output_name(name)
         if name not in {o.name for o in self.mechanism.outputs}:
             known = ", ".join(o.name for o in self.mechanism.outputs)
             raise ToleranceError(f"{self.describe()}: scenario {self.spec.scenario} has no "
@@ -219,7 +227,7 @@ class SessionCase:
         if self.reference is None:
             raise AssertionError(f"{self.describe()}: scenario {self.spec.scenario} has no "
                                  f"verified reference to compare with")
-        name = name or main_output(self.mechanism)
+        name = self._output_name(name)
         values = output_series(self.mechanism, self.reference, name)
         return values[reference_indices(self.reference, self.trajectory.times)]
 

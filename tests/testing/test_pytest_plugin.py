@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import mbh
+
 from mbh._harness.run.case import CaseResult
 from mbh._harness.testing.cases import (CaseRunner, SessionCase, ToleranceError, case_label,
                                         case_spec)
@@ -200,3 +202,18 @@ def test_selection_names_unknown_scenarios_and_adapters():
     assert chosen.reason(case_spec("slider_crank", "exudyn", "best", 1e-3, 0.5)) is None
     assert chosen.reason(case_spec("fourbar_spatial", "exudyn", "best", 1e-3, 0.5)) == (
         "scenario fourbar_spatial not selected (--mbh-scenarios fourbar,slider_crank)")
+
+
+def test_a_mechanism_without_outputs_must_be_given_the_output_to_compare():
+    """A drawn pendulum that declares no output: its runs have no main output, and an assertion
+    on the output says so instead of failing on an index."""
+    mech = (mbh.MechanismBuilder("bare_pendulum", kind="planar", plane="xy", duration=1.0,
+                                 gravity=[0.0, -9.81, 0.0])
+            .body("arm", mass=1.0, inertia=[0.01, 0.1, 0.1], position=[0.5, 0.0, 0.0])
+            .joint("O", "revolute", body1="ground", body2="arm", location=[0, 0, 0])
+            .initial(driver="O", value=0.0, rate=0.0).build())
+    spec = case_spec("bare_pendulum", "inhouse", "rk4+direct", 1e-3, 0.5)
+    case = SessionCase(spec, CaseResult(Trajectory.empty(3), {}, {}), mech, None, lambda: 1.0)
+    with pytest.raises(ToleranceError, match=r"scenario bare_pendulum declares no outputs, so "
+                                             r"there is no main output to compare: declare one"):
+        case.output()
