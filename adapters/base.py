@@ -485,6 +485,12 @@ class Adapter(abc.ABC):
         return {"coordinates": None, "constraint_equations": None, "redundant_equations": None,
                 "notes": f"the {self.name} adapter does not report its model size"}
 
+    def method_model_size(self, model, method: str) -> dict:
+        """What the engine carries for the mechanism of ``model`` when it runs ``method``: the
+        same dict as :meth:`model_size`, which it returns unless a method changes the model (the
+        in-house adapter's ``coords=joint``).  Override it only for such methods."""
+        return self.model_size(model)
+
     def bare_loop(self, model, method: str, dt: float, n_steps: int) -> float:
         """Wall time (s) of the engine's own stepping loop alone: ``n_steps`` steps of ``method``
         from the harness's assembled start, with the settings :meth:`simulate` uses, but no

@@ -273,3 +273,16 @@ def rsrr_fourbar():
     document = tomllib.loads(variant_text("fourbar_spatial", [('type = "cylindrical"',
                                                                'type = "revolute"')]))
     return scenario.from_document(document, "fourbar_rsrr", "fourbar_rsrr")
+
+
+def ball_pendulum():
+    """A hinged arm carrying a bob on a ball joint, drawn by hand: an open chain whose spanning
+    tree must hold the ball (no joint coordinates for it here); it declares no output."""
+    return (mbh.MechanismBuilder("ball_pendulum", kind="spatial", duration=1.0,
+                                 gravity=[0.0, 0.0, -9.81])
+            .body("arm", mass=1.0, inertia=[0.01, 0.1, 0.1], position=[0.5, 0.0, 0.0])
+            .body("bob", mass=1.0, inertia=[0.01, 0.01, 0.01], position=[1.5, 0.0, 0.0])
+            .joint("hinge", "revolute", body1="ground", body2="arm", location=[0, 0, 0],
+                   axis=[0.0, 1.0, 0.0])
+            .joint("ball", "spherical", body1="arm", body2="bob", location=[1.0, 0.0, 0.0])
+            .initial(driver="hinge", value=0.0, rate=0.0).build())

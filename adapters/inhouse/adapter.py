@@ -29,7 +29,10 @@ from mbh._adapters.inhouse.stepping.compiled_stepper import (
 from mbh._adapters.inhouse.stepping.driver import InhouseStepper
 from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
 from mbh._adapters.integrators import integrator_class, integrator_names, integrator_params
-from mbh._adapters.inhouse.formulations.joint_coordinates import COORDINATES, JOINT_TREATMENTS
+from mbh._adapters.inhouse.formulations.joint_coordinates import (COORDINATES, JOINT_LOOPS,
+                                                                  JOINT_TREATMENTS,
+                                                                  auto_coordinates,
+                                                                  joint_model_size)
 from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
 from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
 from mbh._adapters.inhouse.formulations.stabilisation import STRATEGIES
@@ -66,7 +69,7 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
     compiled path add ``loop`` (:data:`~mbh._adapters.inhouse.stepping.compiled_stepper.LOOPS`: ``auto``, the
     default, ``generated``, ``compiled`` or ``python``), treatments that also run in joint
     coordinates add ``coords`` (:data:`~mbh._adapters.inhouse.formulations.joint_coordinates.
-    COORDINATES`: ``absolute``, the default, or ``joint``)."""
+    COORDINATES`: ``absolute``, the default, ``joint`` or ``auto``)."""
     formulation = FORMULATIONS[strategy]
     params = {**integrator_params(integrator), **formulation.defaults}
     description = formulation.description
@@ -74,7 +77,8 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
         params["loop"] = LOOPS[0]
     if strategy in JOINT_TREATMENTS:
         params["coords"] = COORDINATES[0]
-        description += "; coords=joint: in the spanning tree's joint coordinates (Python loop)"
+        description += ("; coords=joint: in the spanning tree's joint coordinates (Python loop), "
+                        "coords=auto: the smaller model")
     return MethodSpec(f"{integrator}+{strategy}", description, params)
 
 
@@ -127,6 +131,17 @@ class InhouseAdapter(Adapter):
                          + (f", redundant: {', '.join(report.redundant_labels)}"
                             if report.redundant else "")}
 
+    def method_model_size(self, model: Mechanism, method: str) -> dict:
+        """:meth:`model_size`, or the joint-coordinate model's size
+        (:func:`~mbh._adapters.inhouse.formulations.joint_coordinates.joint_model_size`) when
+        ``method`` runs in joint coordinates (``coords=joint``, or ``auto`` choosing them)."""
+        _, params = self.method_spec(method)
+        if self._coordinates(model, params)[0] != "joint":
+            return self.model_size(model)
+        from mbh._adapters.inhouse.bodies.kinematics import common_start
+
+        return joint_model_size(model, common_start(model).q)
+
     def _mechanism(self, model: Mechanism) -> Mechanism:
         return model
 
@@ -138,7 +153,7 @@ class InhouseAdapter(Adapter):
         if coords not in COORDINATES:
             raise ValueError(f"parameter 'coords' of {spec.name!r} must be one of "
                              f"{', '.join(COORDINATES)}, got {coords!r}")
-        if coords == "joint" and params.get("loop", "python") not in ("auto", "python"):
+        if coords == "joint" and params.get("loop", "python") not in JOINT_LOOPS:
             raise ValueError(f"parameter 'coords' of {spec.name!r}: coords=joint runs on the "
                              f"Python loop only (loop=auto or loop=python), got "
                              f"loop={params['loop']}")
@@ -150,7 +165,7 @@ class InhouseAdapter(Adapter):
         """The compiled loop alone: ``n_steps`` steps in one call (methods on the compiled path;
         the Python path, ``loop=python``, has no loop apart from the adapter's)."""
         spec, params = self.method_spec(method)
-        if params.get("loop", "python") == "python" or params.get("coords") == "joint":
+        if params.get("loop", "python") == "python" or self._coordinates(model, params)[0] == "joint":
             raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
                                   "the adapter's")
         stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
@@ -165,7 +180,8 @@ class InhouseAdapter(Adapter):
         if spec.name == "ida":
             return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)
-        joint = params.get("coords") == "joint"
+        coords, note = self._coordinates(model, params)
+        joint = coords == "joint"
         formulation = (JOINT_TREATMENTS if joint else FORMULATIONS)[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
@@ -175,10 +191,24 @@ class InhouseAdapter(Adapter):
                 if k not in formulation.defaults and k not in ("loop", "coords")}
         loop = params.get("loop", "python")
         if joint:  # the Python loop over the joint-coordinate model
-            return JointStepper(model, formulation, integrator, rest, own, grid)
-        if loop == "python":
-            return InhouseStepper(model, formulation, integrator, rest, own, grid)
-        return CompiledStepper(model, formulation, integrator, rest, own, grid, loop)
+            stepper = JointStepper(model, formulation, integrator, rest, own, grid)
+        elif loop == "python":
+            stepper = InhouseStepper(model, formulation, integrator, rest, own, grid)
+        else:
+            stepper = CompiledStepper(model, formulation, integrator, rest, own, grid, loop)
+        if note:
+            stepper.notes.insert(0, note)
+        return stepper
+
+    @staticmethod
+    def _coordinates(model: Mechanism, params: dict) -> tuple[str, str]:
+        """The coordinates a run takes (``coords``; ``auto`` resolved by
+        :func:`~mbh._adapters.inhouse.formulations.joint_coordinates.auto_coordinates`) and the
+        note saying why, empty when the method named them."""
+        coords = params.get("coords", COORDINATES[0])
+        if coords != "auto":
+            return coords, ""
+        return auto_coordinates(model, params.get("loop", "auto"))
 
 
 class _IdaStepper(Stepper):

@@ -217,34 +217,34 @@ def changes_table(changes: pd.DataFrame) -> Table:
 
 
 def model_size_table(cases: pd.DataFrame, accuracy: float) -> Table:
-    """Model size per scenario and engine next to its cost.
+    """Model size per scenario, engine and model next to its cost: one row per distinct size an
+    engine carried for the scene (the in-house formulation's absolute and joint-coordinate
+    models side by side), a row with no size for cases whose engine could not build.
 
-    Cost is the median wall time per step over the engine's ``ok`` cases, and the least wall
-    time of a case reaching ``accuracy`` on the main output.
+    Cost is the median wall time per step over the row's ``ok`` cases, and the least wall time
+    of a case reaching ``accuracy`` on the main output.
     """
+    size_columns = ["n_coordinates", "n_constraint_equations", "n_redundant_equations"]
     rows = []
-    for (scenario, adapter), group in cases.groupby(["scenario", "adapter"], sort=True):
-        sizes = group[["n_coordinates", "n_constraint_equations", "n_redundant_equations"]]
-        first = sizes.dropna().iloc[0] if sizes.dropna().shape[0] else None
-        varies = sizes.dropna().drop_duplicates().shape[0] > 1
+    for key, group in cases.groupby(["scenario", "adapter", *size_columns], sort=True,
+                                    dropna=False):
+        scenario, adapter, *sizes = key
         ok = group[group["status"] == CaseStatus.OK]
         per_step = ok["wall_time_per_step_s"].astype(float).median() if len(ok) else None
         hits = reaching(group, accuracy)
         notes = group["model_notes"].dropna()
         rows.append((
-            scenario, adapter,
-            None if first is None else int(first["n_coordinates"]),
-            None if first is None else int(first["n_constraint_equations"]),
-            None if first is None else int(first["n_redundant_equations"]),
+            scenario, adapter, *(None if pd.isna(size) else int(size) for size in sizes),
             _plain(per_step), None if hits.empty else _plain(hits.iloc[0]["wall_time_s"]),
-            ("(varies by method) " if varies else "") + (_plain(notes.iloc[0]) if len(notes) else "")))
+            _plain(notes.iloc[0]) if len(notes) else ""))
     return Table(key="model-size", caption="Model size per engine next to its cost",
                  columns=("scenario", "adapter", "coordinates", "constraint equations",
                           "redundant equations", "median wall time per step (s)",
                           f"fastest to {accuracy:g} (s)", "what the engine carried"),
                  rows=tuple(rows),
                  note="Coordinates and equations of the model each engine builds for the "
-                      "scene; the sizes are those of the first case (marked when they vary).")
+                      "scene, one row per model (the in-house absolute and joint-coordinate "
+                      "models each have their own), with the cost of that model's cases.")
 
 
 def cases_table(cases: pd.DataFrame, calibration_s: float | None) -> Table:

@@ -58,14 +58,15 @@ def _load_reference(mech: Mechanism) -> tuple[Trajectory | None, str]:
         return None, f"none: {' '.join(str(error).split())}"
 
 
-def _model_size(adapter: Adapter, mech: Mechanism) -> dict:
-    """The model-size columns; None with the reason as the note when the engine cannot build."""
+def _model_size(adapter: Adapter, mech: Mechanism, method: str) -> dict:
+    """The model-size columns of ``method``'s model; None with the reason as the note when the
+    engine cannot build."""
     try:
-        size = adapter.model_size(adapter.build(mech))
+        size = adapter.method_model_size(adapter.build(mech), method)
     except UnsupportedCase as error:
         size = _no_size(f"not built: {error}")
     except Exception as error:  # noqa: BLE001 — the run's row already says why (rule 6)
-        size = _no_size(f"not built: {blame(adapter.source, 'build or model_size', error)}")
+        size = _no_size(f"not built: {blame(adapter.source, 'build or method_model_size', error)}")
     return {"n_coordinates": size["coordinates"],
             "n_constraint_equations": size["constraint_equations"],
             "n_redundant_equations": size["redundant_equations"],
@@ -181,7 +182,7 @@ def run_spec(spec: CaseSpec, bounds: Bounds, accuracy: float, mech: Mechanism | 
         walls = [result.trajectory.wall_time_s]
         for _ in range(spec.repetitions - 1):
             walls.append(simulate_case(adapter, mech, spec.method, spec.dt, spec.t_end).wall_time_s)
-        size = _model_size(adapter, mech)
+        size = _model_size(adapter, mech, spec.method)
     except Exception as error:  # noqa: BLE001 — a failure to measure is a result
         return _failed(spec, mech, describe(error), reference_column)
     trajectory, metrics = result.trajectory, result.metrics

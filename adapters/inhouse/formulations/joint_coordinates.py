@@ -44,7 +44,7 @@ import numpy as np
 
 from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
 from mbh._adapters.inhouse.bodies.tree_kinematics import TreeKinematics
-from mbh._adapters.inhouse.bodies.tree_moves import tree_of, unsupported_tree_joints
+from mbh._adapters.inhouse.bodies.tree_moves import tree_moves, tree_of, unsupported_tree_joints
 from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT, range_space_acceleration
 from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.inhouse.formulations.stabilisation import (Baumgarte, DirectCorrection,
@@ -55,8 +55,11 @@ from mbh._adapters.integrators.base import SecondOrderSystem
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.topology import DisconnectedGraphError
 
-#: The values of the method option ``coords``.
-COORDINATES = ("absolute", "joint")
+#: The values of the method option ``coords``: ``auto`` takes the smaller model
+#: (:func:`auto_coordinates`).
+COORDINATES = ("absolute", "joint", "auto")
+#: The loops a joint-coordinate run accepts (it steps in Python; ``auto`` chooses that).
+JOINT_LOOPS = ("auto", "python")
 
 
 def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
@@ -72,6 +75,39 @@ def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
                 "joint needs three rotation coordinates and a chart without singularities); "
                 "coords=absolute runs it")
     return None
+
+
+def auto_coordinates(mech: Mechanism, loop: str) -> tuple[str, str]:
+    """``coords=auto``: the coordinates of the smaller model, and the run's note saying which and
+    why.
+
+    The joint model is taken when its coordinates plus closure equations (n_θ + m_c) are fewer
+    than the absolute model's coordinates plus Φ rows (n + m, the Euler-parameter normalisations
+    included), the spanning tree has joint coordinates for every tree joint, and the method's
+    ``loop`` lets it step in Python (:data:`JOINT_LOOPS`); otherwise the absolute model.
+
+    Returns
+    -------
+    coords : str
+        ``"joint"`` or ``"absolute"``.
+    note : str
+    """
+    absolute = ConstraintSystem(mech)
+    size_absolute = f"{absolute.layout.n} q and {absolute.m} Φ rows"
+    reason = joint_coordinates_unsupported(mech)
+    if reason:
+        return "absolute", f"coords=auto: absolute coordinates ({size_absolute}): {reason}"
+    tree = tree_of(mech)
+    n_theta = tree_moves(mech, tree).n_coordinates
+    m_closure = Closure(mech, tree.cut_joints).m
+    sizes = (f"{n_theta} θ and {m_closure} closure equation(s) against {size_absolute}")
+    if n_theta + m_closure >= absolute.layout.n + absolute.m:
+        return "absolute", f"coords=auto: absolute coordinates, the model no larger ({sizes})"
+    if loop not in JOINT_LOOPS:
+        return "absolute", (f"coords=auto: absolute coordinates, as loop={loop} asks: the joint "
+                            f"model is smaller ({sizes}) but steps in Python only")
+    return "joint", (f"coords=auto: joint coordinates, the smaller model ({sizes}); they step in "
+                     "Python, slower per step than the absolute model's compiled loop")
 
 
 class Closure:
@@ -252,6 +288,15 @@ class JointCoordinates(SecondOrderSystem):
         theta, rate = self.project(t, theta, rate)
         self.counters.update(counters)
         return theta, rate
+
+
+def joint_model_size(mech: Mechanism, q0: np.ndarray) -> dict:
+    """The joint-coordinate model's size as :meth:`mbh._adapters.base.Adapter.model_size` gives
+    it: θ (``coordinates``), the cut joints' closure equations, the redundant ones at the common
+    start ``q0`` (n,), and the run's model note."""
+    model = JointCoordinates(mech, q0, 1.0)
+    return {"coordinates": model.n, "constraint_equations": model.closure.m,
+            "redundant_equations": len(model.redundant), "notes": model.notes[0]}
 
 
 class JointNone(JointCoordinates):

@@ -30,8 +30,8 @@ from mbh._harness.neutral.assembly import AssemblyError
 from mbh._harness.neutral.dynamics import IndeterminateAccelerations, accelerations
 from mbh._harness.neutral.start import initial_state
 from mbh._harness.testing.strategies import mechanisms, redeclare
-from tests.helpers import (TESTS, bennett_linkage, parallel_revolute_fourbar, rsrr_fourbar,
-                           spring_damper_tree)
+from tests.helpers import (TESTS, ball_pendulum, bennett_linkage, parallel_revolute_fourbar,
+                           rsrr_fourbar, spring_damper_tree)
 
 INHOUSE = get_adapter("inhouse")
 JOINT = "rk4+direct:coords=joint"
@@ -346,7 +346,7 @@ def test_coords_is_listed_and_defaults_to_absolute():
 
 @pytest.mark.parametrize("method,message", [
     ("rk4+direct:coords=relative", "parameter 'coords' of 'rk4+direct' must be one of absolute, "
-                                   "joint, got 'relative'"),
+                                   "joint, auto, got 'relative'"),
     ("rk4+direct:coords=joint,loop=compiled", "coords=joint runs on the Python loop only"),
     ("rk4+penalty:coords=joint", "has no parameter coords"),
 ])
@@ -372,14 +372,7 @@ def test_the_run_notes_say_joint_coordinates_and_how_many(name, expected):
 
 def test_a_tree_that_needs_a_spherical_joint_is_unsupported_with_a_reason():
     """A hinged arm carrying a bob on a ball joint: an open chain whose tree holds the ball."""
-    mech = (mbh.MechanismBuilder("ball_pendulum", kind="spatial", duration=1.0,
-                                 gravity=[0.0, 0.0, -9.81])
-            .body("arm", mass=1.0, inertia=[0.01, 0.1, 0.1], position=[0.5, 0.0, 0.0])
-            .body("bob", mass=1.0, inertia=[0.01, 0.01, 0.01], position=[1.5, 0.0, 0.0])
-            .joint("hinge", "revolute", body1="ground", body2="arm", location=[0, 0, 0],
-                   axis=[0.0, 1.0, 0.0])
-            .joint("ball", "spherical", body1="arm", body2="bob", location=[1.0, 0.0, 0.0])
-            .initial(driver="hinge", value=0.0, rate=0.0).build())
+    mech = ball_pendulum()
     trajectory = INHOUSE.simulate(mech, JOINT, 1e-3, 0.01, sample_times(1e-3, 0.01))
     assert trajectory.status == "unsupported"
     assert "ball (spherical)" in trajectory.reason and "coords=absolute" in trajectory.reason
