@@ -44,7 +44,7 @@ PHASES = (
      ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop"),
      ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop"),
      ("fourbar", "rk4+direct:coords=joint", 1e-3, 0.002,
-      "the joint-coordinate path's solves (called from Python)")),
+      "the joint-coordinate path's right-hand side and solves (called from Python)")),
 )
 #: Scenes whose ``default`` and ``best`` generated functions fill idle processes, at a run long
 #: enough for ``loop=auto`` to make them.

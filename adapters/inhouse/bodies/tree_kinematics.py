@@ -2,7 +2,8 @@
 Ḃθ̇, in the absolute layout of :mod:`.constraints` (planar x, y, φ; spatial R and Euler
 parameters, scalar first).
 
-One pass over the moves of :mod:`.tree_moves` (parents first) carries, per frame, the orientation
+One pass over the moves of :mod:`.tree_moves` (parents first; compiled, :mod:`.tree_pass`, one
+call for g, B and Ḃθ̇ together) carries, per frame, the orientation
 (a quaternion e, A = A(e)), the origin r, and the velocity Jacobians J_ω, J_v (3, n_θ) with
 ω = J_ω θ̇ and ṙ = J_v θ̇ in world axes.  With d_P = A_P p (+ σ s A_P u for a slide) and
 d_C = A_C c:
@@ -21,7 +22,9 @@ Euler parameters: ė = ½ L(e) ω with L(e) = [−ēᵀ; e₀I − [ē]×] ((0, 
 B_e = ½ L(e) J_ω and the bias ë = ½ L(e) α − ¼|ω|² e.  Planar: φ̇ = ω_z, the bias φ̈ = α_z; φ is
 carried as a sum of angles (never read back from a matrix), so it does not wrap.  Every column of
 B is analytic (tests/adapters/inhouse/test_joint_coordinates.py checks B and Ḃθ̇ against central
-differences of g).
+differences of g, and the compiled pass against the first, Python one kept there as its oracle).
+This class holds the pass's table and the start's inverse kinematics (θ of an absolute q), which
+runs once per run in Python.
 """
 
 from __future__ import annotations
@@ -30,53 +33,13 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from mbh._adapters.inhouse.bodies.bodykin import PLANAR_NC, SPATIAL_NC
+from mbh._adapters.inhouse.bodies.tree_pass import tree_pass, tree_table
 from mbh._adapters.inhouse.bodies.tree_moves import TreeMoves, tree_moves, tree_of
 from mbh._harness.model.mechanism import Mechanism
 
 #: Largest |g(θ₀) − q₀| accepted at the start (m, rad, Euler parameters): the common start meets
 #: the tree joints' equations to ~1e-15, and the inverse kinematics is exact up to round-off.
 START_MATCH = 1e-9
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """a × b of two 3-vectors, shape (3,) (written out: ``np.cross`` costs ~40 µs a call in
-    its axis handling, the formulation's largest cost in the first measurement)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
-
-
-def _product(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Quaternion product a ⊗ b, scalar first, shape (4,)."""
-    a0, a1, a2, a3 = a
-    b0, b1, b2, b3 = b
-    return np.array([a0 * b0 - a1 * b1 - a2 * b2 - a3 * b3,
-                     a0 * b1 + b0 * a1 + a2 * b3 - a3 * b2,
-                     a0 * b2 + b0 * a2 + a3 * b1 - a1 * b3,
-                     a0 * b3 + b0 * a3 + a1 * b2 - a2 * b1])
-
-
-def _turn(axis: np.ndarray, angle: float) -> np.ndarray:
-    """The quaternion of a rotation by ``angle`` (rad) about the unit ``axis``."""
-    return np.array([np.cos(0.5 * angle), *(np.sin(0.5 * angle) * axis)])
-
-
-def _matrix(e: np.ndarray) -> np.ndarray:
-    """A(e) (3, 3) of a unit quaternion, scalar first (Rouvinen 2003, eq. 5)."""
-    e0, e1, e2, e3 = e
-    a = 2.0 * e0 * e0 - 1.0
-    return np.array([[a + 2.0 * e1 * e1, 2.0 * (e1 * e2 - e0 * e3), 2.0 * (e1 * e3 + e0 * e2)],
-                     [2.0 * (e2 * e1 + e0 * e3), a + 2.0 * e2 * e2, 2.0 * (e2 * e3 - e0 * e1)],
-                     [2.0 * (e3 * e1 - e0 * e2), 2.0 * (e3 * e2 + e0 * e1), a + 2.0 * e3 * e3]])
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    """[v]× (3, 3): [v]× x = v × x."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _rate_map(e: np.ndarray) -> np.ndarray:
-    """L(e) (4, 3): (0, ω) ⊗ e = L(e) ω."""
-    return np.vstack([-e[1:], e[0] * np.eye(3) - _skew(e[1:])])
 
 
 def _planar_angle(e: np.ndarray) -> float:
@@ -115,8 +78,8 @@ class TreeKinematics:
         self.n = self.moves.n_coordinates
         self.n_absolute = self.n_bodies * self.nc
         self._signs = np.ones(self.n_bodies)
-        self._offset_angles = [_planar_angle(move.offset) for move in self.moves.moves]
         self._turns = np.zeros(self.n_bodies)
+        self._set_table()
         self.theta0 = self.coordinates_of(q0)
         q = self.positions(self.theta0)
         if self.planar:
@@ -124,58 +87,32 @@ class TreeKinematics:
         else:
             e, e_start = q.reshape(-1, 7)[:, 3:], q0.reshape(-1, 7)[:, 3:]
             self._signs = np.where(np.sum(e * e_start, axis=1) < 0.0, -1.0, 1.0)
+        self._set_table()
         gap = float(np.abs(self.positions(self.theta0) - q0).max(initial=0.0))
         if not gap <= START_MATCH:
             raise ValueError(f"mechanism {mech.name!r}: the tree's kinematics reproduce the "
                              f"common start only to {gap:.3g} (> {START_MATCH:g}); its tree "
                              "joints are not assembled there")
 
-    # -- the pass over the moves ----------------------------------------------------------------
-    def _pass(self, theta: np.ndarray, rate: np.ndarray | None, jacobian: bool):
-        """Per frame: (e, A, r, φ, J_ω, J_v, α, a); rate None: no bias; jacobian False: no J."""
-        n_frames, n = self.moves.n_frames, self.n
-        ground = (np.array([1.0, 0.0, 0.0, 0.0]), np.eye(3), np.zeros(3), 0.0,
-                  np.zeros((3, n)), np.zeros((3, n)), np.zeros(3), np.zeros(3))
-        frames: list = [None] * n_frames
-        for index, move in enumerate(self.moves.moves):
-            e_p, a_p, r_p, phi_p, jw_p, jv_p, al_p, ac_p = (frames[move.parent] if move.parent >= 0
-                                                            else ground)
-            k, sign = move.coordinate, move.sign
-            axis_w = a_p @ move.axis
-            if move.kind == "turn":
-                e = _product(_product(e_p, _turn(move.axis, sign * theta[k])), move.offset)
-                d_p = a_p @ move.at_parent
-            else:
-                e = _product(e_p, move.offset)
-                d_p = a_p @ move.at_parent + sign * theta[k] * axis_w
-            a = _matrix(e)
-            d_c = a @ move.at_child
-            r = r_p + d_p - d_c
-            phi = phi_p + (sign * theta[k] * move.axis[2] if move.kind == "turn" else 0.0) \
-                + self._offset_angles[index]
-            jw, jv = jw_p, jv_p
-            if jacobian or rate is not None:
-                jw = jw_p.copy()
-                if move.kind == "turn":
-                    jw[:, k] += sign * axis_w
-                jv = jv_p - _skew(d_p) @ jw_p + _skew(d_c) @ jw
-                if move.kind == "slide":
-                    jv[:, k] += sign * axis_w
-            alpha, acc = al_p, ac_p
-            if rate is not None:
-                w_p, w = jw_p @ rate, jw @ rate
-                alpha = al_p + (_cross(w_p, sign * rate[k] * axis_w) if move.kind == "turn"
-                                else 0.0)
-                acc = (ac_p + _cross(al_p, d_p) + _cross(w_p, _cross(w_p, d_p))
-                       - _cross(alpha, d_c) - _cross(w, _cross(w, d_c)))
-                if move.kind == "slide":
-                    acc = acc + 2.0 * sign * rate[k] * _cross(w_p, axis_w)
-            frames[move.child] = (e, a, r, phi, jw, jv, alpha, acc)
-        return frames[:self.n_bodies]
+    # -- the pass over the moves (compiled: :mod:`.tree_pass`) ---------------------------------
+    @property
+    def turns(self) -> np.ndarray:
+        """Multiples of 2π added to each body's planar angle (b,), rad."""
+        return self._turns
+
+    @property
+    def signs(self) -> np.ndarray:
+        """±1 on each body's Euler parameters (b,)."""
+        return self._signs
+
+    def _set_table(self) -> None:
+        """The flat table of :func:`~.tree_pass.tree_pass` for the current turns and signs."""
+        self.table = tree_table(self.moves, self._turns, self._signs, self.planar)
 
     def positions(self, theta: np.ndarray) -> np.ndarray:
         """q = g(θ), shape (n,)."""
-        return self._absolute(self._pass(np.asarray(theta, dtype=float), None, False))[0]
+        theta = np.asarray(theta, dtype=float)
+        return tree_pass(theta, np.zeros(self.n), self.table)[0]
 
     def evaluate(self, theta: np.ndarray, rate: np.ndarray | None = None):
         """g(θ) (n,), B(θ) (n, n_θ) and, given θ̇ (n_θ,), the bias Ḃθ̇ (n,), else None.
@@ -183,36 +120,11 @@ class TreeKinematics:
         Units: q in m and rad (planar) or m and Euler parameters; B's columns per unit
         coordinate (rad or m); Ḃθ̇ in m/s², rad/s² or 1/s².
         """
-        rate = None if rate is None else np.asarray(rate, dtype=float)
-        return self._absolute(self._pass(np.asarray(theta, dtype=float), rate, True), True, rate)
-
-    def _absolute(self, frames, jacobian: bool = False, rate: np.ndarray | None = None):
-        """(q, B or None, Ḃθ̇ or None) in the absolute layout from the bodies' frames; the bias
-        needs θ̇ (``rate``)."""
-        bias = rate is not None
-        nc, n = self.nc, self.n
-        q = np.empty(self.n_absolute)
-        b = np.empty((self.n_absolute, n)) if jacobian else None
-        bias_q = np.empty(self.n_absolute) if bias else None
-        for index, (e, _, r, phi, jw, jv, alpha, acc) in enumerate(frames):
-            k = index * nc
-            if self.planar:
-                q[k:k + 3] = r[0], r[1], phi + self._turns[index]
-                if jacobian:
-                    b[k:k + 2], b[k + 2] = jv[:2], jw[2]
-                if bias:
-                    bias_q[k:k + 3] = acc[0], acc[1], alpha[2]
-                continue
-            sign = self._signs[index]
-            q[k:k + 3], q[k + 3:k + 7] = r, sign * e
-            if jacobian:
-                rate_map = 0.5 * sign * _rate_map(e)
-                b[k:k + 3], b[k + 3:k + 7] = jv, rate_map @ jw
-                if bias:
-                    omega = jw @ rate
-                    bias_q[k:k + 3] = acc
-                    bias_q[k + 3:k + 7] = rate_map @ alpha - 0.25 * sign * (omega @ omega) * e
-        return q, b, bias_q
+        theta = np.asarray(theta, dtype=float)
+        given = rate is not None
+        rate = np.asarray(rate, dtype=float) if given else np.zeros(self.n)
+        q, b, bias = tree_pass(theta, rate, self.table)
+        return q, b, (bias if given else None)
 
     # -- from absolute coordinates ----------------------------------------------------------------
     def coordinates_of(self, q: np.ndarray) -> np.ndarray:
@@ -258,7 +170,7 @@ class TreeKinematics:
         if joint.type == "universal":
             crossed = relative0.apply(np.asarray(joint.axis2, dtype=float))
             moved = turned.apply(crossed)
-            first = float(np.arctan2(a1 @ _cross(crossed, moved), crossed @ moved))
+            first = float(np.arctan2(a1 @ np.cross(crossed, moved), crossed @ moved))
             rest = Rotation.from_rotvec(first * a1).inv() * turned
             return [first, _angle_about(rest, crossed)]
         if self.planar:

@@ -17,7 +17,8 @@ joints are the absolute equations of those joints alone, Φ_θ(θ) = Φ_cut(g(θ
 
     C_θ = Φ_cut,q B (m_c, n_θ),   γ_θ = γ_cut − Φ_cut,q Ḃθ̇ (m_c,)
 
-(Φ_cut,q, γ_cut from :class:`~mbh._adapters.inhouse.bodies.constraints.ConstraintSystem`).  The
+(Φ_cut,q, γ_cut from :class:`~mbh._adapters.inhouse.bodies.constraints.ConstraintSystem`).  All of
+it, from θ to θ̈, is one compiled call (:mod:`.joint_rhs`).  The
 pair [M_θ C_θᵀ; C_θ 0] is solved by the absolute formulation's range-space solve
 (:func:`~mbh._adapters.inhouse.formulations.dynamics.range_space_acceleration`): certified
 Cholesky, else the truncated SVD, so redundant closure rows (Bricard, parallel revolutes) are
@@ -45,7 +46,8 @@ import numpy as np
 from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
 from mbh._adapters.inhouse.bodies.tree_kinematics import TreeKinematics
 from mbh._adapters.inhouse.bodies.tree_moves import tree_moves, tree_of, unsupported_tree_joints
-from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT, range_space_acceleration
+from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT
+from mbh._adapters.inhouse.formulations.joint_rhs import acceleration_kernel, reduced_kernel
 from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.inhouse.formulations.stabilisation import (Baumgarte, DirectCorrection,
                                                               NoStabilisation)
@@ -112,18 +114,21 @@ def auto_coordinates(mech: Mechanism, loop: str) -> tuple[str, str]:
 
 class Closure:
     """The absolute equations of the cut joints, Φ_cut (m_c,), Φ_cut,q (m_c, n), γ_cut (m_c,)
-    (Euler-parameter normalisations left out: g(θ) meets them identically)."""
+    (Euler-parameter normalisations left out: g(θ) meets them identically; none for an open
+    chain)."""
 
     def __init__(self, mech: Mechanism, cut_joints: tuple[str, ...]):
-        self.system = None
-        self.m = 0
-        self.labels: tuple[str, ...] = ()
-        if cut_joints:
-            cut = dataclasses.replace(mech, joints=tuple(mech.joint(n) for n in cut_joints),
-                                      forces=())
-            self.system = ConstraintSystem(cut)
-            self.m = self.system.n_joint_equations
-            self.labels = self.system.labels[:self.m]
+        cut = dataclasses.replace(mech, joints=tuple(mech.joint(n) for n in cut_joints),
+                                  forces=())
+        self.system = ConstraintSystem(cut)
+        self.m = self.system.n_joint_equations
+        self.labels: tuple[str, ...] = self.system.labels[:self.m]
+
+    @property
+    def kernel_args(self) -> tuple:
+        """The cut joints' arguments of :mod:`~mbh._adapters.inhouse.bodies.kernels` (those of a
+        system without joints for an open chain: m = 0)."""
+        return self.system.kernel_args
 
     def phi(self, q, t):
         return self.system.phi(q, t)[:self.m]
@@ -183,6 +188,7 @@ class JointCoordinates(SecondOrderSystem):
         self.closure = Closure(mech, tree.cut_joints)
         self.n = self.kinematics.n
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
+        self._args = self._kernel_args()
         self.rank, self.redundant = self._rank_at(self.kinematics.theta0)
         self.notes = [self._model_note(tree)]
 
@@ -222,32 +228,25 @@ class JointCoordinates(SecondOrderSystem):
         """Φ_θ = Φ_cut(g(θ)), shape (m_c,)."""
         return self.closure.phi(self.kinematics.positions(theta), t)
 
+    def _kernel_args(self) -> tuple:
+        """The arguments after (θ, θ̇, t) of :func:`~.joint_rhs.reduced_kernel`."""
+        return (self.kinematics.table, self.dynamics.kernel_args, self.closure.kernel_args,
+                self.closure.m, (float(self.gains[0]), float(self.gains[1])))
+
     def reduced(self, t, theta, rate):
         """(M_θ (n_θ, n_θ), Q_θ (n_θ,), C_θ (m_c, n_θ), γ_θ (m_c,)) at (t, θ, θ̇), the
-        Baumgarte terms included (kg·m², N·m or kg, N per coordinate)."""
-        q, b, bias = self.kinematics.evaluate(theta, rate)
-        v = b @ rate
-        mass, force = self.dynamics.mass_and_forces(t, q, v)
-        mass_theta = np.ascontiguousarray(b.T @ mass @ b)
-        force_theta = b.T @ (force - mass @ bias)
-        if not self.closure.m:
-            return mass_theta, force_theta, np.zeros((0, self.n)), np.zeros(0)
-        jac = self.closure.jacobian(q, t)
-        c = np.ascontiguousarray(jac @ b)
-        gamma = self.closure.gamma(q, v, t) - jac @ bias
-        alpha, beta = self.gains
-        if alpha or beta:
-            gamma = gamma - 2.0 * alpha * (c @ rate) - beta * beta * self.closure.phi(q, t)
-        return mass_theta, force_theta, c, gamma
+        Baumgarte terms included (kg·m², N·m or kg, N per coordinate), in one compiled call
+        (:func:`~.joint_rhs.reduced_kernel`)."""
+        return reduced_kernel(np.asarray(theta, dtype=float), np.asarray(rate, dtype=float),
+                              float(t), *self._args)
 
     def acceleration(self, t, q, v):
-        """θ̈ (n_θ,) of [M_θ C_θᵀ; C_θ 0] by the range-space solve."""
+        """θ̈ (n_θ,) of [M_θ C_θᵀ; C_θ 0] by the range-space solve, in one compiled call
+        (:func:`~.joint_rhs.acceleration_kernel`)."""
         self.counters["jacobian_evals"] += 1
         self.counters["factorizations"] += 1
-        mass, force, c, gamma = self.reduced(t, np.asarray(q, dtype=float),
-                                             np.asarray(v, dtype=float))
-        return range_space_acceleration(mass, c, force, np.ascontiguousarray(gamma),
-                                        ACCELERATION_CUT)
+        return acceleration_kernel(np.asarray(q, dtype=float), np.asarray(v, dtype=float),
+                                   float(t), *self._args, ACCELERATION_CUT)
 
     # -- the stepper's protocol (as :class:`~.stabilisation.Formulation`) -----------------------
     def start(self, q, v):
@@ -315,6 +314,7 @@ class JointBaumgarte(JointCoordinates):
         if self.params["auto"]:
             self.params["alpha"], self.params["beta"] = 1.0 / dt, np.sqrt(2.0) / dt
         self.gains = (float(self.params["alpha"]), float(self.params["beta"]))
+        self._args = self._kernel_args()
 
 
 class JointDirect(JointCoordinates):
