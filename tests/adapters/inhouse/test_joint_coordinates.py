@@ -36,7 +36,6 @@ from tests.helpers import (TESTS, ball_pendulum, bennett_linkage, parallel_revol
 
 INHOUSE = get_adapter("inhouse")
 JOINT = "rk4+direct:coords=joint"
-ABSOLUTE = "rk4+direct"
 
 
 def double_pendulum():
