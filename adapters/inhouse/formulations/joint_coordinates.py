@@ -50,7 +50,8 @@ from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT
 from mbh._adapters.inhouse.formulations.joint_rhs import acceleration_kernel, reduced_kernel
 from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.inhouse.formulations.stabilisation import (Baumgarte, DirectCorrection,
-                                                              NoStabilisation)
+                                                              NoStabilisation, newton_onto,
+                                                              projection_cut)
 from mbh._adapters.inhouse.numerics.linalg import truncated_solve
 from mbh._adapters.inhouse.numerics.rank import RANK_TOLERANCE, full_pivot_elimination
 from mbh._adapters.integrators.base import SecondOrderSystem
@@ -325,12 +326,8 @@ class JointDirect(JointCoordinates):
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
-        self.cut = 0.0
-        if self.closure.m:
-            values = np.linalg.svd(self.closure_jacobian(0.0, self.kinematics.theta0),
-                                   compute_uv=False)
-            rank = max(int(np.count_nonzero(values > RANK_TOLERANCE * max(values[0], 1.0))), 1)
-            self.cut = float(self.params["singular_cut"]) * float(values[rank - 1] / values[0])
+        self.cut = (projection_cut(self.closure_jacobian(0.0, self.kinematics.theta0),
+                                   self.params["singular_cut"]) if self.closure.m else 0.0)
 
     def _min_norm(self, c, residual):
         """C_θ⁺ r, truncated at ``cut`` × the largest singular value (as the absolute
@@ -339,18 +336,10 @@ class JointDirect(JointCoordinates):
         return truncated_solve(np.ascontiguousarray(c), np.ascontiguousarray(residual), self.cut)
 
     def project_position(self, t, theta):
-        """Newton on Φ_θ(θ) = 0 with C_θ⁺ until max |Φ_θ| < ``proj_tol`` or an iteration no
-        longer reduces it."""
-        previous = np.inf
-        for _ in range(int(self.params["proj_max_iter"])):
-            residual = self.closure_residual(t, theta)
-            size = np.max(np.abs(residual))
-            if size < self.params["proj_tol"] or not size < previous:
-                break
-            previous = size
-            self.counters["newton_iterations"] += 1
-            theta = theta - self._min_norm(self.closure_jacobian(t, theta), residual)
-        return theta
+        """Newton on Φ_θ(θ) = 0 with C_θ⁺ (eq. 127 in θ): :func:`~.stabilisation.newton_onto`."""
+        return newton_onto(lambda x: self.closure_residual(t, x),
+                           lambda x, residual: self._min_norm(self.closure_jacobian(t, x), residual),
+                           theta, self.params, self.counters)
 
     def project(self, t, q, v):
         if not self.closure.m:

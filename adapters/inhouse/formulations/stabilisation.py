@@ -310,9 +310,7 @@ class _Projection(Formulation):
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
-        values = np.linalg.svd(self.jacobian(0.0, q0), compute_uv=False)
-        rank = np.count_nonzero(values > RANK_TOLERANCE * max(values[0], 1.0))
-        self.cut = float(self.params["singular_cut"]) * float(values[rank - 1] / values[0])
+        self.cut = projection_cut(self.jacobian(0.0, q0), self.params["singular_cut"])
 
     def _min_norm(self, jac, residual):
         """Φ_q⁺ r (eq. 126), truncated (see the class docstring), and ρ̂ of ``jac`` from the
@@ -328,19 +326,37 @@ class _Projection(Formulation):
         self._min_norm(self.jacobian(0.0, q), self.phi(0.0, q))
 
     def project_position(self, t, q):
-        """Newton on Φ(q) = 0 with Φ_q⁺ (eq. 127) until max |Φ| < ``proj_tol``, or until an
-        iteration no longer reduces it (the round-off floor of a large mechanism can lie above a
-        tight tolerance: on n_fourbar@16 proj_tol 1e-15 ran all 10 iterations in most steps)."""
-        previous = np.inf
-        for _ in range(int(self.params["proj_max_iter"])):
-            residual = self.phi(t, q)
-            size = np.max(np.abs(residual))
-            if size < self.params["proj_tol"] or not size < previous:
-                break
-            previous = size
-            self.counters["newton_iterations"] += 1
-            q = q - self._min_norm(self.jacobian(t, q), residual)[0]
-        return q
+        """Newton on Φ(q) = 0 with Φ_q⁺ (eq. 127): :func:`newton_onto`."""
+        return newton_onto(lambda x: self.phi(t, x),
+                           lambda x, residual: self._min_norm(self.jacobian(t, x), residual)[0],
+                           q, self.params, self.counters)
+
+
+def projection_cut(jac: np.ndarray, singular_cut: float) -> float:
+    """The truncation of the direct projection's pseudo-inverse (:class:`DirectCorrection`):
+    ``singular_cut`` × σ_r/σ_1 of ``jac`` (m, n) at the start, r its numerical rank (at least 1);
+    singular values below that × the largest are left out."""
+    values = np.linalg.svd(jac, compute_uv=False)
+    rank = max(int(np.count_nonzero(values > RANK_TOLERANCE * max(values[0], 1.0))), 1)
+    return float(singular_cut) * float(values[rank - 1] / values[0])
+
+
+def newton_onto(residual_at, correction, x, params: dict, counters: dict):
+    """Newton onto residual_at(x) = 0 with x ← x − correction(x, residual), until
+    max |residual| < ``params["proj_tol"]``, or until an iteration no longer reduces it (the
+    round-off floor of a large mechanism can lie above a tight tolerance: on n_fourbar@16
+    proj_tol 1e-15 ran all 10 iterations in most steps), at most ``params["proj_max_iter"]``
+    iterations, each counted in ``counters["newton_iterations"]`` (Rouvinen 2003, eq. 127)."""
+    previous = np.inf
+    for _ in range(int(params["proj_max_iter"])):
+        residual = residual_at(x)
+        size = np.max(np.abs(residual))
+        if size < params["proj_tol"] or not size < previous:
+            break
+        previous = size
+        counters["newton_iterations"] += 1
+        x = x - correction(x, residual)
+    return x
 
 
 class DirectCorrection(_Projection):
