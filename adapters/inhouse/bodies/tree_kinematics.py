@@ -34,7 +34,8 @@ from scipy.spatial.transform import Rotation
 
 from mbh._adapters.inhouse.bodies.bodykin import PLANAR_NC, SPATIAL_NC
 from mbh._adapters.inhouse.bodies.tree_pass import tree_pass, tree_table
-from mbh._adapters.inhouse.bodies.tree_moves import TreeMoves, tree_moves, tree_of
+from mbh._adapters.inhouse.bodies.tree_moves import (TREE_JOINT_COORDINATES, TreeMoves,
+                                                     tree_moves, tree_of)
 from mbh._harness.model.mechanism import Mechanism
 
 #: Largest |g(θ₀) − q₀| accepted at the start (m, rad, Euler parameters): the common start meets
@@ -139,7 +140,7 @@ class TreeKinematics:
             done.add(move.joint)
             joint = mech.joint(move.joint)
             first = min(m.coordinate for m in self.moves.moves if m.joint == move.joint)
-            theta[first:first + (2 if joint.type in ("cylindrical", "universal") else 1)] = \
+            theta[first:first + TREE_JOINT_COORDINATES[joint.type]] = \
                 self._joint_coordinates(joint, q, nc)
         return theta
 
