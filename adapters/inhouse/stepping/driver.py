@@ -31,6 +31,11 @@ from mbh._harness.model.trajectory import BodyStates
 #: (2-core machine, 2026-11-29, with Φ, Φ_q and γ compiled alone without their helpers inlined:
 #: 14 s in all; Φ 1.7, Φ_q 1.8, γ 2.3, the rank's full pivoting 4.3, ρ̂ 3.5).
 START_COMPILE_S = 15.0
+#: Measured first compilation of what a formulation's ``warm_up`` calls on the Python loop, s
+#: (2-core machine, 2026-11-29, empty cache): the absolute kernels' right-hand side ~80 s, the
+#: joint-coordinate one with its solves ~70 s.  Keyed by the formulation's class, as the start's
+#: block above: the absolute and joint-coordinate ``direct`` compile different kernels.
+RIGHT_HAND_SIDE_COMPILE_S = 75.0
 _INTEGRATOR_COUNTERS = {"rhs_evals": "nfev", "jacobian_evals": "njev", "factorizations": "nlu",
                         "newton_iterations": "n_newton"}
 
@@ -59,7 +64,7 @@ class FormulationStepper(Stepper):
         self.grid = grid
         self.layout = layout_of(mech)
         # Per formulation: each calls its own kernels at its construction (ρ̂ only some).
-        with on_demand.first_use(f"start-{formulation_class.name}",
+        with on_demand.first_use(f"start-{formulation_class.__name__}",
                                  "the kernels of the start and of the formulations "
                                  "(Φ, Φ_q, γ, the rank, ρ̂)", START_COMPILE_S):
             assembly = common_start(mech)
@@ -95,7 +100,10 @@ class InhouseStepper(FormulationStepper):
         super().__init__(mech, formulation_class, formulation_params, grid)
         formulation, (q0, v0) = self.formulation, self._start_state
         formulation.start(q0, v0)
-        formulation.warm_up(q0, v0)
+        with on_demand.first_use(f"warm-up-{formulation_class.__name__}",
+                                 "the formulation's right-hand side and projection",
+                                 RIGHT_HAND_SIDE_COMPILE_S):
+            formulation.warm_up(q0, v0)
         self.integrator_name, self.integrator_params = integrator_name, integrator_params
         self._spent = dict.fromkeys(_INTEGRATOR_COUNTERS, 0)
         self._banked_steps = 0
