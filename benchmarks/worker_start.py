@@ -1,7 +1,7 @@
 """Per-case overhead of the campaign executor: warm workers (forked from the template) against cold
 ones (a fresh interpreter per case), measured side by side in one run, and the rows compared.
 
-Run:  .venv/bin/python benchmarks/worker_start.py [CAMPAIGN] [--repeats N] [--workers W]
+Run:  .venv/bin/python benchmarks/worker_start.py [CAMPAIGN] [--repeats N] [--workers W] [--warm-only]
 
 Each repeat runs the campaign (default ``smoke``) once warm and once cold, alternately, into
 temporary results roots, with the campaign's machine-speed figure.  The first warm run starts the
@@ -17,6 +17,7 @@ the run's own ids).  Numbers are measured on the machine that runs it; nothing i
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import statistics
 import tempfile
 import time
@@ -63,11 +64,13 @@ def main() -> None:
     parser.add_argument("campaign", nargs="?", default="smoke")
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--workers", type=int, default=usable_cores())
+    parser.add_argument("--warm-only", action="store_true", help="no cold runs")
     args = parser.parse_args()
-    campaign = load_campaign(args.campaign)
-    results = {True: [], False: []}
+    campaign = dataclasses.replace(load_campaign(args.campaign), sweep=None)
+    sides = (True,) if args.warm_only else (True, False)
+    results = {warm: [] for warm in sides}
     for repeat in range(args.repeats):
-        for warm in (True, False):
+        for warm in sides:
             wall, cases = timed_run(campaign, args.workers, warm)
             results[warm].append((wall, cases))
             print(f"run {repeat + 1} {'warm' if warm else 'cold'}: {len(cases)} cases, "
@@ -78,6 +81,10 @@ def main() -> None:
                                        for wall, cases in runs)
                for warm, runs in results.items()}
     walls = {warm: statistics.median(wall for wall, _ in runs) for warm, runs in results.items()}
+    if args.warm_only:
+        print(f"median overhead per case: warm {medians[True]:.3f} s; median campaign wall "
+              f"{walls[True]:.1f} s")
+        return
     print(f"median overhead per case: warm {medians[True]:.3f} s, cold {medians[False]:.3f} s "
           f"(warm/cold {medians[True] / medians[False]:.3f}); median campaign wall: warm "
           f"{walls[True]:.1f} s, cold {walls[False]:.1f} s")

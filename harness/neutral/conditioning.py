@@ -8,25 +8,24 @@ do not make every instant singular, and a rank lost later shows as σ_r/σ_1 →
 A *near-singular position* is a local minimum of σ_r/σ_1 at or below :data:`SINGULAR_DROP` times
 its median over the run (relative, so that a Jacobian whose rows mix very different scales, as in
 Andrews' squeezer, is not singular everywhere).  A failure *at* it is one whose failure time lies
-within :data:`SINGULAR_WINDOW_S` of such a minimum of the verified reference; :func:`label_failure`
-then says so in the run's reason ("singular configuration ..."), and for a scene whose joint
-equations are redundant it names the overconstrained loop.
+within :data:`SINGULAR_WINDOW_S` of such a minimum of the verified reference;
+:func:`mbh._harness.measure.failure_label.label_failure` then says so in the run's reason
+("singular configuration ..."), and for a scene whose joint equations are redundant it names the
+overconstrained loop.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.signal import find_peaks
 
-from mbh._harness.neutral.assembly import assemble
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.neutral.mobility import independent_rows
 from mbh._harness.common.status import CaseStatus
+from mbh._harness.neutral.mobility import independent_rows
 from mbh._harness.model.trajectory import Trajectory
 
 #: Fraction of its median at or below which a local minimum of σ_r/σ_1 counts as a near-singular
@@ -112,42 +111,3 @@ def conditioning(mech: Mechanism, trajectory: Trajectory, t_end: float | None = 
     threshold = SINGULAR_DROP * float(np.median(ratio))
     dips, _ = find_peaks(-ratio, height=-threshold)
     return Conditioning(times, ratio, rank, jacobian.shape[1], dips, threshold)
-
-
-def label_failure(mech: Mechanism, trajectory: Trajectory,
-                  reference: Trajectory | None) -> Trajectory:
-    """The trajectory with its reason prefixed by what the scene's geometry says about it.
-
-    * A run that stopped (:data:`STOPPED`) within :data:`SINGULAR_WINDOW_S` of a near-singular
-      position of the reference: "singular configuration (σ_r/σ_1 = … at t = … s in the
-      reference): <reason>".
-    * A run that did not end ``ok`` on a scene whose joint equations are redundant at the start:
-      "; overconstrained loop: k of the n joint equations are redundant" appended.
-
-    Parameters
-    ----------
-    trajectory : Trajectory
-        The judged run (:func:`mbh._harness.measure.verdict.judge`); returned unchanged when ``ok``.
-    reference : Trajectory or None
-        The verified reference (without one, only the redundancy is checked, at the assembled
-        start).
-    """
-    if trajectory.status == CaseStatus.OK:
-        return trajectory
-    reason = trajectory.reason or trajectory.status
-    if (reference is not None and reference.n_samples and trajectory.status in STOPPED
-            and trajectory.failure_time is not None):
-        analysis = conditioning(mech, reference)
-        passage = analysis.near(float(trajectory.failure_time))
-        if passage is not None:
-            reason = (f"singular configuration (the reference's σ_r/σ_1 of Φ_q dips to "
-                      f"{analysis.ratio_at(passage):.2g} at t = {passage:.4g} s): {reason}")
-    start = assemble(mech).states
-    jacobian = JointEquations(mech).jacobian(start.position, start.quaternion)
-    redundant = jacobian.shape[0] - len(independent_rows(jacobian))
-    if redundant:
-        reason = (f"{reason}; overconstrained loop: {redundant} of the {jacobian.shape[0]} "
-                  "joint equations are redundant")
-    if reason == (trajectory.reason or trajectory.status):
-        return trajectory
-    return dataclasses.replace(trajectory, reason=reason)

@@ -207,6 +207,24 @@ class _Recorder:
         return remaining
 
 
+def first_runs(campaign) -> list[tuple[str, str, str, float]]:
+    """(scenario, adapter, method, dt s) of the first case of each (adapter, method) of the
+    campaign, its sweep's included, in the campaign's order: what the warm template runs once
+    (:meth:`~mbh._harness.run.executor.WorkerProcesses.start_template`).  Adapters given as a class or an
+    instance are left out (the template finds only registered ones)."""
+    given = {name for name, _ in campaign.given_adapters}
+    runs = {}
+    for spec in campaign.cases:
+        runs.setdefault((spec.adapter, spec.method), (spec.scenario, spec.dt))
+    sweep = campaign.sweep
+    if sweep is not None:
+        for adapter, methods in sweep.methods.items():
+            for method in methods:
+                runs.setdefault((adapter, method), (sweep.scenarios[0], sweep.dt_max))
+    return [(scene, adapter, method, dt) for (adapter, method), (scene, dt) in runs.items()
+            if adapter not in given]
+
+
 def _cache_keys(names: set[str], adapters: set[str]) -> dict[str, str]:
     """Content hashes of the scenarios and versions of the adapters (for an adapter that cannot
     be loaded, the reason: its cases become rows that say so)."""
@@ -322,7 +340,7 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     # The template's start overlaps the references' preparation and, when it starts now, the
     # calibration in this process (mbh._harness.run.calibration).
     template_starting = (scheduler is None and warm_workers
-                         and WorkerProcesses.start_template(names))
+                         and WorkerProcesses.start_template(names, first_runs(campaign)))
     prepare_references(names, say)
     backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 from mbh._adapters.base import Adapter, UnsupportedCase, blame
 from mbh._harness.common.status import CaseStatus
 from mbh._harness.common.capture import captured_output, engine_note
-from mbh._harness.neutral.conditioning import label_failure
+from mbh._harness.measure.failure_label import label_failure
 from mbh._harness.measure.metrics import case_metrics
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.topology import DisconnectedGraphError
@@ -115,7 +115,7 @@ def _built(adapter: Adapter, mech: Mechanism):
 def run_case(adapter: Adapter, mech: Mechanism, method: str, dt: float, t_end: float,
              reference: Trajectory | None = None, bounds: Bounds = DEFAULT_BOUNDS) -> CaseResult:
     """Simulate one case, judge it (:func:`mbh._harness.measure.verdict.judge`), say where it failed
-    (:func:`mbh._harness.neutral.conditioning.label_failure`: at a singular configuration, on an
+    (:func:`mbh._harness.measure.failure_label.label_failure`: at a singular configuration, on an
     overconstrained loop) and measure it.
 
     Parameters

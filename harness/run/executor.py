@@ -76,6 +76,9 @@ OUTPUT_TAIL = 600
 #: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template which
 #: scenarios to read before its first fork: a JSON list of names or paths.
 WARM_SCENARIOS_ENV = "MBH_WARM_SCENARIOS"
+#: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template which
+#: methods to run once before its first fork: a JSON list of [scenario, adapter, method, dt].
+WARM_METHODS_ENV = "MBH_WARM_METHODS"
 
 
 @contextlib.contextmanager
@@ -242,18 +245,24 @@ class WorkerProcesses:
         return cls._context
 
     @classmethod
-    def start_template(cls, scenarios: Iterable[str] = ()) -> bool:
+    def start_template(cls, scenarios: Iterable[str] = (),
+                       methods: Iterable[tuple[str, str, str, float]] = ()) -> bool:
         """Start the warm template now, in the background, so that its imports and warm-up
         (~1.5–1.8 s) overlap the caller's own preparation instead of delaying the first case.
         The template also reads ``scenarios`` (names or paths) and their stored references once,
-        for every case forked from it (:data:`WARM_SCENARIOS_ENV`).  A template that is already
-        running is kept as it is; one that cannot start is left to :meth:`start`, which says so.
-        Returns whether a template started now (so that this process has time to spare)."""
+        for every case forked from it (:data:`WARM_SCENARIOS_ENV`), and runs each of ``methods``
+        ((scenario, adapter, method, dt s): one per method of the campaign) for a few steps, so
+        that what a method loads on its first run (compiled loops and kernels, an engine's
+        libraries) is loaded once rather than in every case (:data:`WARM_METHODS_ENV`).  A
+        template that is already running is kept as it is; one that cannot start is left to
+        :meth:`start`, which says so.  Returns whether a template started now (so that this
+        process has time to spare)."""
         cls._fork_context()
         server = multiprocessing.forkserver._forkserver
         before = getattr(server, "_forkserver_pid", None)
-        with contextlib.suppress(OSError, EOFError, ValueError), \
-                _environment({WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios)))}):
+        told = {WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios))),
+                WARM_METHODS_ENV: json.dumps([list(method) for method in methods])}
+        with contextlib.suppress(OSError, EOFError, ValueError), _environment(told):
             multiprocessing.forkserver.ensure_running()
             return getattr(server, "_forkserver_pid", None) not in (None, before)
         return False

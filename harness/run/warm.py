@@ -2,7 +2,8 @@
 (:mod:`multiprocessing.forkserver`, the ``preload`` of
 :class:`mbh._harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy,
 scipy, the harness and every registered engine, runs a few tiny cases so the compiled in-house
-kernels are loaded from numba's cache, and reads the campaign's scenarios and their stored
+kernels are loaded from numba's cache, runs each of the campaign's methods for a few steps so
+what it loads on its first run is loaded once, and reads the campaign's scenarios and their stored
 references (:mod:`mbh._harness.common.kept_files`), assembles their starts and computes what the
 measuring stick derives from each reference alone.  Each case's process is then forked from this
 state: a fresh process per case (a crash stays a row) that starts in milliseconds instead of
@@ -73,6 +74,35 @@ def _warm_up() -> list[str]:
     return missed
 
 
+#: Steps of each of the campaign's methods run in the template (:func:`_warm_methods`): enough to
+#: take a method through its start and its loop once.
+METHOD_STEPS = 3
+
+
+def _warm_methods() -> list[str]:
+    """Run each method :data:`~mbh._harness.run.executor.WARM_METHODS_ENV` names (one per
+    (adapter, method) of the campaign, on the scene and step of its first case) for
+    :data:`METHOD_STEPS` steps, results discarded: what a method loads on its first run (the
+    in-house compiled loops and the kernels its formulation calls from Python, ~0.1–0.2 s each
+    from numba's cache; an engine's libraries) is then loaded once here instead of in each of its
+    cases.  A run that fails only leaves that load to its cases.  Returns what could not be
+    warmed."""
+    import numpy as np
+
+    from mbh._adapters import get_adapter
+    from mbh._harness.model import scenario
+    from mbh._harness.run.executor import WARM_METHODS_ENV
+
+    missed = []
+    for scene, adapter, method, dt in json.loads(os.environ.get(WARM_METHODS_ENV) or "[]"):
+        try:
+            get_adapter(adapter).simulate(scenario.load(scene), method, dt, METHOD_STEPS * dt,
+                                          np.zeros(1))
+        except Exception as error:  # noqa: BLE001 — see _warm_up
+            missed.append(f"{scene}/{adapter}/{method}: {error}")
+    return missed
+
+
 def _keep_scenarios() -> list[str]:
     """Read the scenarios :data:`~mbh._harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
     references, inside :func:`mbh._harness.common.kept_files.keeping`, assemble each scene's start
@@ -103,4 +133,4 @@ def _keep_scenarios() -> list[str]:
 
 #: What the warm-up could not do, for diagnostics (``python -c "import mbh._harness.run.warm"``).
 #: The scenarios are read after the warm-up cases, so nothing those did can change what is kept.
-MISSED = _warm_up() + _keep_scenarios()
+MISSED = _warm_up() + _warm_methods() + _keep_scenarios()

@@ -1,5 +1,5 @@
 """The warm template (mbh._harness.run.warm) keeps the scenarios it was told to read and their
-references, and imports no pandas (that its cases store the rows of fresh interpreters:
+references, runs the methods it was told once, and imports no pandas (that its cases store the rows of fresh interpreters:
 tests/run/test_runner.py)."""
 
 from __future__ import annotations
@@ -9,7 +9,9 @@ import os
 import subprocess
 import sys
 
-from mbh._harness.run.executor import WARM_SCENARIOS_ENV
+from mbh._harness.run.campaign import first_runs
+from mbh._harness.run.executor import WARM_METHODS_ENV, WARM_SCENARIOS_ENV
+from mbh._harness.run.spec import load_campaign
 
 
 def test_the_template_keeps_the_scenarios_it_was_told_to_read_and_their_references():
@@ -32,3 +34,37 @@ print(told is scenario.load("fourbar"), other is scenario.load("slider_crank"),
     # A case never needs pandas (the store is the campaign's process's): importing it added
     # 0.37 s to the template's start, and to every case whose work's module imported it.
     assert done.stdout.split() == ["True", "False", "True", "False", "[]", "False"], done.stderr
+
+
+def test_the_template_runs_each_method_it_was_told_and_reports_one_that_fails():
+    """The campaign's methods run once in the template, so their compiled loops are loaded there
+    (the implicit multistep loop of bdf4 here, which the template's own warm-up cases do not
+    load), and a method that cannot run is reported, not raised."""
+    script = """
+import mbh._harness.run.warm as warm
+from mbh._adapters.inhouse.stepping import compiled_multistep
+print(len(compiled_multistep.run_samples.overloads), len(warm.MISSED))
+print(warm.MISSED)
+"""
+    told = [["fourbar", "inhouse", "bdf4+direct", 1e-3], ["fourbar", "inhouse", "rk4+nosuch", 1e-3]]
+    lines = {}
+    for methods in ([], told):
+        env = os.environ | {WARM_METHODS_ENV: json.dumps(methods)}
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                              text=True, check=True)
+        lines[len(methods)] = done.stdout.splitlines()
+    assert lines[0][0] == "0 0"
+    assert lines[2][0] == "1 1"
+    assert "fourbar/inhouse/rk4+nosuch" in lines[2][1]
+
+
+def test_first_runs_name_each_method_of_a_campaign_once_with_its_first_case():
+    campaign = load_campaign("nightly")
+    runs = first_runs(campaign)
+    pairs = [(adapter, method) for _, adapter, method, _ in runs]
+    assert len(pairs) == len(set(pairs))
+    assert set(pairs) == ({(spec.adapter, spec.method) for spec in campaign.cases}
+                          | {(adapter, method) for adapter, methods in campaign.sweep.methods.items()
+                             for method in methods})
+    first = campaign.cases[0]
+    assert runs[0] == (first.scenario, first.adapter, first.method, first.dt)

@@ -3,7 +3,7 @@
 The rank-revealing pieces: :func:`mbh._adapters.inhouse.numerics.linalg.truncated_solve`, the range-space
 acceleration :func:`mbh._adapters.inhouse.formulations.dynamics.range_space_acceleration`, the truncated projection
 of :class:`mbh._adapters.inhouse.formulations.stabilisation.DirectCorrection`; and
-:func:`mbh._harness.neutral.conditioning.label_failure`.
+:func:`mbh._harness.measure.failure_label.label_failure`.
 """
 
 from __future__ import annotations
