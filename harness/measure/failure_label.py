@@ -2,10 +2,11 @@
 reference, on an overconstrained loop (:mod:`mbh._harness.neutral.conditioning` says where a
 scene is near-singular).
 
-What the labels read from the scene alone is computed once and kept: the reference's conditioning
-per frozen reference (:mod:`mbh._harness.measure.per_reference`; the warm template computes it
-for every case forked from it, :func:`mbh._harness.measure.verdict.prepare_reference`) and the
-redundant joint equations at the assembled start per scene (by content hash).
+The redundant joint equations at the assembled start are computed once per scene (by content
+hash; the warm template computes them for every case forked from it,
+:func:`mbh._harness.measure.verdict.prepare_reference`).  The reference's conditioning is not: an
+SVD of Φ_q at every reference sample, ~0.12 s a scene, which would delay every campaign's first
+case to spare the failed cases ~30 ms each.
 """
 
 from __future__ import annotations
@@ -13,22 +14,15 @@ from __future__ import annotations
 import dataclasses
 
 from mbh._harness.common.status import CaseStatus
-from mbh._harness.measure.per_reference import per_reference
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import Trajectory
 from mbh._harness.neutral.assembly import assemble
-from mbh._harness.neutral.conditioning import STOPPED, Conditioning, conditioning
+from mbh._harness.neutral.conditioning import STOPPED, conditioning
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.neutral.mobility import independent_rows
 
 #: Content hash → (redundant, all) joint equations at the assembled start, of the scenes seen.
 _START_REDUNDANCY: dict[str, tuple[int, int]] = {}
-
-
-@per_reference
-def reference_conditioning(mech: Mechanism, reference: Trajectory) -> Conditioning:
-    """:func:`~mbh._harness.neutral.conditioning.conditioning` of the verified reference."""
-    return conditioning(mech, reference)
 
 
 def start_redundancy(mech: Mechanism) -> tuple[int, int]:
@@ -69,7 +63,7 @@ def label_failure(mech: Mechanism, trajectory: Trajectory,
     reason = trajectory.reason or trajectory.status
     if (reference is not None and reference.n_samples and trajectory.status in STOPPED
             and trajectory.failure_time is not None):
-        analysis = reference_conditioning(mech, reference)
+        analysis = conditioning(mech, reference)
         passage = analysis.near(float(trajectory.failure_time))
         if passage is not None:
             reason = (f"singular configuration (the reference's σ_r/σ_1 of Φ_q dips to "

@@ -74,30 +74,27 @@ def _warm_up() -> list[str]:
     return missed
 
 
-#: Steps of each of the campaign's methods run in the template (:func:`_warm_methods`): enough to
-#: take a method through its start and its loop once.
-METHOD_STEPS = 3
-
-
 def _warm_methods() -> list[str]:
     """Run each method :data:`~mbh._harness.run.executor.WARM_METHODS_ENV` names (one per
-    (adapter, method) of the campaign, on the scene and step of its first case) for
-    :data:`METHOD_STEPS` steps, results discarded: what a method loads on its first run (the
-    in-house compiled loops and the kernels its formulation calls from Python, ~0.1–0.2 s each
-    from numba's cache; an engine's libraries) is then loaded once here instead of in each of its
-    cases.  A run that fails only leaves that load to its cases.  Returns what could not be
-    warmed."""
-    import numpy as np
+    (adapter, method) of the campaign, on the scene and step of its first case) over one sample
+    interval of its scene (:func:`mbh._harness.run.case.simulate_case`, results discarded): what
+    a method loads on its first run (the in-house compiled loops and the kernels its formulation
+    calls from Python, ~0.1–0.2 s each from numba's cache; an engine's libraries) is then loaded
+    once here instead of in each of its cases.  A run that fails only leaves that load to its
+    cases.  Returns what could not be warmed."""
+    import math
 
     from mbh._adapters import get_adapter
     from mbh._harness.model import scenario
+    from mbh._harness.run.case import simulate_case
     from mbh._harness.run.executor import WARM_METHODS_ENV
 
     missed = []
     for scene, adapter, method, dt in json.loads(os.environ.get(WARM_METHODS_ENV) or "[]"):
         try:
-            get_adapter(adapter).simulate(scenario.load(scene), method, dt, METHOD_STEPS * dt,
-                                          np.zeros(1))
+            mech = scenario.load(scene)
+            steps = max(1, math.ceil(mech.sample_step / dt - 1e-9))
+            simulate_case(get_adapter(adapter), mech, method, dt, steps * dt)
         except Exception as error:  # noqa: BLE001 — see _warm_up
             missed.append(f"{scene}/{adapter}/{method}: {error}")
     return missed
