@@ -280,19 +280,6 @@ def test_unprojected_treatments_match_the_absolute_ones(treatment):
     assert found["joint"][1] <= 3 * found["absolute"][1], found
 
 
-def test_rk4_converges_at_fourth_order_on_the_fourbar_in_joint_coordinates():
-    """The crank angle against the verified reference at 5, 2.5, 1.25 ms over 1 s (the steps of
-    test_dynamics.py's ORDERS_FAST for rk4+direct, whose absolute slope measured 4.01): measured
-    4.03 (7.03e-7, 4.30e-8, 2.65e-9 rad)."""
-    mech = scenario.load("fourbar")
-    reference = reference_trajectory(mech)
-    steps = [5e-3, 2.5e-3, 1.25e-3]
-    errors = [case_metrics(mech, run(mech, JOINT, dt, 1.0), reference)["output_errors"]
-              ["crank_angle"] for dt in steps]
-    slope = np.polyfit(np.log(steps), np.log(errors), 1)[0]
-    assert abs(slope - 4.0) <= 0.3, (slope, errors)
-
-
 #: Other integrator families on the four-bar at 1 ms over 1 s, joint and absolute coordinates
 #: (loop=python where there is a compiled loop): crank-angle error against the reference (rad),
 #: measured 2026-11-29 (absolute; joint): rk45 (rtol 1e-9, atol 1e-11; dense output projected
