@@ -11,9 +11,10 @@ the mechanism (``loop=auto``, the default, or ``generated``;
 :mod:`mbh._adapters.inhouse.stepping.compiled_stepper`), with the generic kernels (``loop=compiled``) or
 stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
 methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`).
-``none``, ``baumgarte`` and ``direct`` also take ``coords=joint``: the same treatment in the
-spanning tree's joint coordinates (:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`),
-on the Python loop.
+``none``, ``baumgarte``, ``direct`` and ``partition`` also take ``coords=joint``: the same
+treatment in the spanning tree's joint coordinates
+(:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`,
+:mod:`mbh._adapters.inhouse.formulations.joint_partition`), on the Python loop.
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from mbh._adapters.inhouse.formulations.joint_coordinates import (COORDINATES, J
                                                                   JOINT_TREATMENTS,
                                                                   auto_coordinates,
                                                                   joint_model_size)
+from mbh._adapters.inhouse.formulations.joint_partition import JointPartition
 from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
 from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
 from mbh._adapters.inhouse.formulations.stabilisation import STRATEGIES
@@ -41,6 +43,8 @@ from mbh._harness.model.trajectory import BodyStates
 
 FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning,
                 NewtonEuler.name: NewtonEuler}
+#: The treatments that also run in joint coordinates (``coords=joint``), by name.
+JOINT_FORMULATIONS = {**JOINT_TREATMENTS, JointPartition.name: JointPartition}
 
 #: What a user gets without choosing: the seed comparison's classic setting (α = β = 5).
 DEFAULT_METHOD = "rk4+baumgarte"
@@ -75,7 +79,7 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
     description = formulation.description
     if has_compiled_path(integrator, strategy):
         params["loop"] = LOOPS[0]
-    if strategy in JOINT_TREATMENTS:
+    if strategy in JOINT_FORMULATIONS:
         params["coords"] = COORDINATES[0]
         description += ("; coords=joint: in the spanning tree's joint coordinates (Python loop), "
                         "coords=auto: the smaller model")
@@ -182,7 +186,7 @@ class InhouseAdapter(Adapter):
         integrator, strategy = _split(spec.name)
         coords, note = self._coordinates(model, params)
         joint = coords == "joint"
-        formulation = (JOINT_TREATMENTS if joint else FORMULATIONS)[strategy]
+        formulation = (JOINT_FORMULATIONS if joint else FORMULATIONS)[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
             raise UnsupportedCase(reason)
