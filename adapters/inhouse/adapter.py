@@ -2,7 +2,8 @@
 
 Method names are ``INTEGRATOR+STABILISATION[:key=value,...]`` (e.g. ``rk4+baumgarte``,
 ``bdf4+direct:tol=1e-5``, ``dop853+partition:rtol=1e-12``), plus ``ida[:...]`` (the DAE solver) and
-the aliases ``default`` and ``best``.  Parameters go to whichever part declares them; the
+the aliases ``default`` and ``best`` (which take ``coords`` alone: ``best:coords=joint`` is
+``rk4+direct:proj_tol=1e-15,coords=joint``).  Parameters go to whichever part declares them; the
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
 Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
 one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition``, and linear multistep
@@ -107,9 +108,14 @@ class InhouseAdapter(Adapter):
     def method_spec(self, method: str) -> tuple[MethodSpec, dict]:
         name, given = parse_method(method)
         if name in ALIASES:
+            others = sorted(set(given) - {"coords"})
+            if others:
+                raise ValueError(f"the alias {name!r} takes coords only (its method in the chosen "
+                                 f"coordinates), not {', '.join(others)}; use {ALIASES[name]}")
+            method = ALIASES[name]
             if given:
-                raise ValueError(f"the alias {name!r} takes no parameters; use {ALIASES[name]}")
-            return self.method_spec(ALIASES[name])
+                method += ("," if ":" in method else ":") + f"coords={given['coords']}"
+            return self.method_spec(method)
         if name == "ida":
             from mbh._adapters.inhouse.formulations.dae import ida_params
             spec = MethodSpec("ida", "SUNDIALS IDA on the DAE", ida_params())

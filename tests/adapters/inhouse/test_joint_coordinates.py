@@ -411,6 +411,23 @@ def test_a_bad_coords_value_is_refused_by_name(method, message):
         INHOUSE.simulate(mech, method, 1e-3, 0.01, sample_times(1e-3, 0.01))
 
 
+@pytest.mark.parametrize("alias,method", [("best", "rk4+direct:proj_tol=1e-15,coords=joint"),
+                                          ("default", "rk4+baumgarte:coords=joint")])
+def test_the_aliases_take_coords_and_run_their_method_there(alias, method):
+    mech = scenario.load("fourbar")
+    by_alias, spelled = run(mech, f"{alias}:coords=joint", 1e-3, 0.05), run(mech, method, 1e-3, 0.05)
+    assert any(note.startswith("joint coordinates") for note in by_alias.notes), by_alias.notes
+    np.testing.assert_array_equal(by_alias.position, spelled.position)
+    np.testing.assert_array_equal(by_alias.velocity, spelled.velocity)
+
+
+def test_an_alias_refuses_any_other_parameter_naming_its_method():
+    with pytest.raises(ValueError, match=re.escape("the alias 'best' takes coords only (its method "
+                                                   "in the chosen coordinates), not proj_tol; use "
+                                                   "rk4+direct:proj_tol=1e-15")):
+        INHOUSE.method_spec("best:proj_tol=1e-3")
+
+
 @pytest.mark.parametrize("name,expected", [
     ("bricard", "5 θ (joint A angle, joint F angle, joint B angle, joint E angle, joint D angle), "
                 "5 closure equation(s) at cut joint(s) C of rank 4, 1 redundant (joint C "
