@@ -42,11 +42,14 @@ class JointPartition(Partitioned, JointCoordinates):
         self.split_rank = self.rank
         self._start_partition(self.kinematics.theta0)
         labels = self.kinematics.moves.coordinate_labels
+        independent = ", ".join(labels[i] for i in self.independent)
         self.notes.append(
-            f"coordinate partitioning over θ: {self.n} independent "
-            f"({', '.join(labels[i] for i in self.independent)}) integrated at the start, "
-            f"{self.dependent.size} dependent solved by Newton on all {self.closure.m} closure "
-            "equation(s) (least squares: redundant rows kept)")
+            f"coordinate partitioning over θ: {self.n} independent ({independent}) integrated at "
+            f"the start, {self.dependent.size} dependent solved by Newton on all "
+            f"{self.closure.m} closure equation(s) (least squares: redundant rows kept)"
+            if self.closure.m else
+            f"coordinate partitioning over θ: no closure equations, every θ ({independent}) "
+            "integrated")
 
     def _split_jacobian(self, t, theta):
         return self.closure_jacobian(t, theta)

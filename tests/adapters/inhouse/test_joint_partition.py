@@ -78,6 +78,7 @@ def test_an_open_chain_has_nothing_to_partition():
     (rk4+none in joint coordinates) to the last bit."""
     mech = scenario.load("simple_pendulum")
     partitioned, plain = run(mech, JOINT, 1e-3, 0.5), run(mech, "rk4+none:coords=joint", 1e-3, 0.5)
+    assert "no closure equations, every θ (joint pivot angle) integrated" in partitioned.notes[-1]
     np.testing.assert_array_equal(partitioned.position, plain.position)
     np.testing.assert_array_equal(partitioned.velocity, plain.velocity)
 
