@@ -2,7 +2,8 @@
 
 Method names are ``INTEGRATOR+STABILISATION[:key=value,...]`` (e.g. ``rk4+baumgarte``,
 ``bdf4+direct:tol=1e-5``, ``dop853+partition:rtol=1e-12``), plus ``ida[:...]`` (the DAE solver) and
-the aliases ``default`` and ``best``.  Parameters go to whichever part declares them; the
+the aliases ``default`` and ``best`` (which take ``coords`` alone: ``best:coords=joint`` is
+``rk4+direct:proj_tol=1e-15,coords=joint``).  Parameters go to whichever part declares them; the
 integrator's and the strategy's parameter names are disjoint (``tol`` is always the integrator's
 Newton tolerance, ``proj_tol`` the projection's, ``newton_tol`` the partitioning's).  Explicit
 one-step methods with ``none``, ``baumgarte``, ``direct`` or ``partition``, and linear multistep
@@ -11,9 +12,10 @@ the mechanism (``loop=auto``, the default, or ``generated``;
 :mod:`mbh._adapters.inhouse.stepping.compiled_stepper`), with the generic kernels (``loop=compiled``) or
 stepped from Python (``loop=python``); all compute the same numbers (the implicit multistep
 methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled_multistep`).
-``none``, ``baumgarte`` and ``direct`` also take ``coords=joint``: the same treatment in the
-spanning tree's joint coordinates (:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`),
-on the Python loop.
+``none``, ``baumgarte``, ``direct`` and ``partition`` also take ``coords=joint``: the same
+treatment in the spanning tree's joint coordinates
+(:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`,
+:mod:`mbh._adapters.inhouse.formulations.joint_partition`), on the Python loop.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from mbh._adapters.inhouse.formulations.joint_coordinates import (COORDINATES, J
                                                                   JOINT_TREATMENTS,
                                                                   auto_coordinates,
                                                                   joint_model_size)
+from mbh._adapters.inhouse.formulations.joint_partition import JointPartition
 from mbh._adapters.inhouse.formulations.newton_euler import NewtonEuler
 from mbh._adapters.inhouse.formulations.partition import CoordinatePartitioning
 from mbh._adapters.inhouse.formulations.stabilisation import STRATEGIES
@@ -43,6 +46,8 @@ from mbh._harness.model.trajectory import BodyStates
 
 FORMULATIONS = {**STRATEGIES, CoordinatePartitioning.name: CoordinatePartitioning,
                 NewtonEuler.name: NewtonEuler}
+#: The treatments that also run in joint coordinates (``coords=joint``), by name.
+JOINT_FORMULATIONS = {**JOINT_TREATMENTS, JointPartition.name: JointPartition}
 
 #: What a user gets without choosing: the seed comparison's classic setting (α = β = 5).
 DEFAULT_METHOD = "rk4+baumgarte"
@@ -77,7 +82,7 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
     description = formulation.description
     if has_compiled_path(integrator, strategy):
         params["loop"] = LOOPS[0]
-    if strategy in JOINT_TREATMENTS:
+    if strategy in JOINT_FORMULATIONS:
         params["coords"] = COORDINATES[0]
         description += ("; coords=joint: in the spanning tree's joint coordinates (Python loop), "
                         "coords=auto: the smaller model")
@@ -113,9 +118,14 @@ class InhouseAdapter(Adapter):
     def method_spec(self, method: str) -> tuple[MethodSpec, dict]:
         name, given = parse_method(method)
         if name in ALIASES:
+            others = sorted(set(given) - {"coords"})
+            if others:
+                raise ValueError(f"the alias {name!r} takes coords only (its method in the chosen "
+                                 f"coordinates), not {', '.join(others)}; use {ALIASES[name]}")
+            method = ALIASES[name]
             if given:
-                raise ValueError(f"the alias {name!r} takes no parameters; use {ALIASES[name]}")
-            return self.method_spec(ALIASES[name])
+                method += ("," if ":" in method else ":") + f"coords={given['coords']}"
+            return self.method_spec(method)
         if name == "ida":
             from mbh._adapters.inhouse.formulations.dae import ida_params
             spec = MethodSpec("ida", "SUNDIALS IDA on the DAE", ida_params())
@@ -195,7 +205,7 @@ class InhouseAdapter(Adapter):
         integrator, strategy = _split(spec.name)
         coords, note = self._coordinates(model, params)
         joint = coords == "joint"
-        formulation = (JOINT_TREATMENTS if joint else FORMULATIONS)[strategy]
+        formulation = (JOINT_FORMULATIONS if joint else FORMULATIONS)[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
         if reason:
             raise UnsupportedCase(reason)

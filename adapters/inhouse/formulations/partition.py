@@ -16,6 +16,11 @@ reduced ODE's derivatives grow, and the Runge–Kutta error constant with them, 
 ``cond_ratio`` switches at a 1 % advantage (figures: docs/measurements.md, section "In-house
 formulation").  A re-partition restarts the integrator (multistep
 history is lost).
+
+The treatment itself (:class:`Partitioned`) is written over any coordinates x with constraints
+c(x) = 0; :class:`CoordinatePartitioning` puts it over the absolute coordinates q and Φ(q), and
+:class:`~mbh._adapters.inhouse.formulations.joint_partition.JointPartition` over the joint
+coordinates θ and the closure equations Φ_θ(θ) (``coords=joint``).
 """
 
 from __future__ import annotations
@@ -28,7 +33,104 @@ from mbh._adapters.inhouse.numerics.rank import full_pivot_elimination
 from mbh._adapters.inhouse.formulations.stabilisation import Formulation
 
 
-class CoordinatePartitioning(Formulation):
+class Partitioned:
+    """Coordinate partitioning over coordinates x (n_x,) with constraints c(x) = 0 (r_c rows),
+    a mixin put before the formulation whose ``acceleration``, ``reduce`` and ``expand`` it wraps
+    (their full-coordinate versions, reached by ``super()``).
+
+    The subclass provides ``_split_jacobian(t, x)`` (r_c, n_x), ``_split_residual(t, x)`` (r_c,),
+    ``_dependent_solve(block, rhs)`` (y with block @ y = rhs, block (r_c, n_D), rhs (r_c,) or
+    (r_c, k)), ``_split_point(x_full)`` (the full coordinates the split is chosen at, from what
+    the stepper passes), ``_record_indicator(jac)`` and ``split_rank``, the rank c_x must keep
+    (a split needs n_D = ``split_rank`` dependent coordinates; fewer pivots mean a singular
+    configuration).  Attributes: ``dependent``, ``independent`` (index arrays into x),
+    ``repartitions``.
+    """
+
+    def _start_partition(self, x0: np.ndarray) -> None:
+        """The first split, at the full coordinates ``x0`` (n_x,)."""
+        self._x = np.array(x0, dtype=float)
+        self.repartitions = -1  # the first choice below is not a re-partition
+        self.choose_partition(x0)
+
+    # -- the split -----------------------------------------------------------------------------
+    def _best_split(self, x_full: np.ndarray):
+        """Dependent coordinates chosen by full pivoting on c_xᵀ at the split point of
+        ``x_full``, and c_x there."""
+        jac = self._split_jacobian(0.0, self._split_point(x_full))
+        rank, pivots = full_pivot_elimination(jac.T)
+        if rank < self.split_rank:
+            raise StepFailure(f"constraint Jacobian lost rank ({rank} < {self.split_rank}): "
+                              "singular configuration")
+        return np.sort(pivots), jac
+
+    def choose_partition(self, x_full: np.ndarray) -> None:
+        """Pick dependent coordinates as the full-pivoting pivot columns of c_x."""
+        self.dependent, jac = self._best_split(x_full)
+        self.independent = np.setdiff1d(np.arange(jac.shape[1]), self.dependent)
+        self.n = self.independent.size
+        self.repartitions += 1
+        self._sensitivity = None
+
+    def needs_repartition(self, x_full: np.ndarray) -> bool:
+        """True when cond(c_x,D) of the current split exceeds ``cond_ratio`` × that of the split
+        full pivoting would choose; ``_record_indicator`` sees c_x there."""
+        best, jac = self._best_split(x_full)
+        self._record_indicator(jac)
+        if np.array_equal(best, self.dependent):
+            return False
+        current = np.linalg.cond(jac[:, self.dependent])
+        return bool(current > self.params["cond_ratio"] * np.linalg.cond(jac[:, best]))
+
+    # -- full ↔ reduced state --------------------------------------------------------------
+    def reduce(self, q: np.ndarray, v: np.ndarray):
+        """(x_I, ẋ_I) from a full state (the formulation's ``reduce`` first)."""
+        x, rate = super().reduce(q, v)
+        self._x = np.array(x, dtype=float)
+        return x[self.independent].copy(), rate[self.independent].copy()
+
+    def complete(self, t: float, x_ind: np.ndarray, v_ind: np.ndarray):
+        """Full (x, ẋ) consistent with the constraints, from (x_I, ẋ_I) (eq. 80–84).
+
+        Newton starts from the last solution moved along the sensitivity dx_D/dx_I there, so it
+        usually needs one or two iterations.
+        """
+        x = self._x.copy()
+        if self._sensitivity is not None:
+            x[self.dependent] += self._sensitivity @ (x_ind - x[self.independent])
+        x[self.independent] = x_ind
+        for _ in range(int(self.params["newton_max_iter"])):
+            residual = self._split_residual(t, x)
+            if np.abs(residual).max(initial=0.0) < self.params["newton_tol"]:
+                break
+            self.counters["newton_iterations"] += 1
+            jac = self._split_jacobian(t, x)
+            x[self.dependent] -= self._dependent_solve(jac[:, self.dependent], residual)
+        else:
+            raise StepFailure(f"dependent coordinates did not converge (max |Φ| = "
+                              f"{np.max(np.abs(residual)):.3g}) at t = {t:g}")
+        jac = self._split_jacobian(t, x)
+        self._sensitivity = self._dependent_solve(jac[:, self.dependent],
+                                                  -np.ascontiguousarray(jac[:, self.independent]))
+        self._x = x
+        v = np.zeros(x.size)
+        v[self.independent] = v_ind
+        v[self.dependent] = self._sensitivity @ v_ind
+        return x, v
+
+    def expand(self, t: float, x_ind: np.ndarray, v_ind: np.ndarray):
+        """The formulation's full state of :meth:`complete`."""
+        return super().expand(t, *self.complete(t, x_ind, v_ind))
+
+    # -- the reduced problem -------------------------------------------------------------------
+    def acceleration(self, t, x_ind, v_ind):
+        """ẍ_I: the formulation's full acceleration at the completed state, its independent
+        entries (eq. 86–89)."""
+        x, v = self.complete(t, x_ind, v_ind)
+        return super().acceleration(t, x, v)[self.independent]
+
+
+class CoordinatePartitioning(Partitioned, Formulation):
     name = "partition"
     description = ("coordinate partitioning (Rouvinen 2003, eq. 78–89): integrate the independent "
                    "coordinates, solve the dependent ones by Newton; re-partition when the "
@@ -49,75 +151,21 @@ class CoordinatePartitioning(Formulation):
 
     def __init__(self, mech, q0, dt, **params):
         super().__init__(mech, q0, dt, **params)
-        self._q = np.array(q0, dtype=float)
-        self.repartitions = -1  # the first choice below is not a re-partition
-        self.choose_partition(self._q)
+        self.split_rank = self.rows.size  # the independent rows of the rank analysis at q0
+        self._start_partition(q0)
 
-    # -- the split -----------------------------------------------------------------------------
-    def _best_split(self, q: np.ndarray):
-        """Dependent coordinates chosen by full pivoting at q, and Φ_q there."""
-        jac = self.jacobian(0.0, q)
-        rank, pivots = full_pivot_elimination(jac.T)
-        if rank < jac.shape[0]:
-            raise StepFailure(f"constraint Jacobian lost rank ({rank} < {jac.shape[0]}): "
-                              "singular configuration")
-        return np.sort(pivots), jac
+    def _split_jacobian(self, t, q):
+        return self.jacobian(t, q)
 
-    def choose_partition(self, q: np.ndarray) -> None:
-        """Pick dependent coordinates as the full-pivoting pivot columns of Φ_q at q."""
-        self.dependent, jac = self._best_split(q)
-        self.independent = np.setdiff1d(np.arange(jac.shape[1]), self.dependent)
-        self.n = self.independent.size
-        self.repartitions += 1
-        self._sensitivity = None
+    def _split_residual(self, t, q):
+        return self.phi(t, q)
 
-    def needs_repartition(self, q_full: np.ndarray) -> bool:
-        """True when cond(Φ_qD) of the current split exceeds ``cond_ratio`` × that of the split
-        full pivoting would choose at q_full; ρ̂ of Φ_q there is recorded for the placed
-        passages (the compiled loop's ``split_check`` does the same)."""
-        best, jac = self._best_split(q_full)
-        self._record_indicator(jac)
-        if np.array_equal(best, self.dependent):
-            return False
-        current = np.linalg.cond(jac[:, self.dependent])
-        return bool(current > self.params["cond_ratio"] * np.linalg.cond(jac[:, best]))
+    @staticmethod
+    def _split_point(q_full):
+        return q_full
 
-    # -- full ↔ reduced state --------------------------------------------------------------
-    def reduce(self, q: np.ndarray, v: np.ndarray):
-        """(q_I, q̇_I) from a full state."""
-        self._q = np.array(q, dtype=float)
-        return q[self.independent].copy(), v[self.independent].copy()
-
-    def expand(self, t: float, q_ind: np.ndarray, v_ind: np.ndarray):
-        """Full (q, q̇) consistent with the constraints, from (q_I, q̇_I) (eq. 80–84).
-
-        Newton starts from the last solution moved along the sensitivity dq_D/dq_I there, so it
-        usually needs one or two iterations.
-        """
-        q = self._q.copy()
-        if self._sensitivity is not None:
-            q[self.dependent] += self._sensitivity @ (q_ind - q[self.independent])
-        q[self.independent] = q_ind
-        for _ in range(int(self.params["newton_max_iter"])):
-            residual = self.phi(t, q)
-            if np.max(np.abs(residual)) < self.params["newton_tol"]:
-                break
-            self.counters["newton_iterations"] += 1
-            jac = self.jacobian(t, q)
-            q[self.dependent] -= solve(np.ascontiguousarray(jac[:, self.dependent]), residual)
-        else:
-            raise StepFailure(f"dependent coordinates did not converge (max |Φ| = "
-                              f"{np.max(np.abs(residual)):.3g}) at t = {t:g}")
-        jac = self.jacobian(t, q)
-        block = np.ascontiguousarray(jac[:, self.dependent])
-        self._sensitivity = solve_matrix(block, -np.ascontiguousarray(jac[:, self.independent]))
-        self._q = q
-        v = np.zeros(q.size)
-        v[self.independent] = v_ind
-        v[self.dependent] = self._sensitivity @ v_ind
-        return q, v
-
-    # -- the reduced problem -------------------------------------------------------------------
-    def acceleration(self, t, q_ind, v_ind):
-        q, v = self.expand(t, q_ind, v_ind)
-        return super().acceleration(t, q, v)[self.independent]
+    @staticmethod
+    def _dependent_solve(block, rhs):
+        """A square dependent block (the independent rows only): LU."""
+        block = np.ascontiguousarray(block)
+        return solve(block, rhs) if rhs.ndim == 1 else solve_matrix(block, rhs)
