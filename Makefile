@@ -37,16 +37,15 @@ report: $(STAMP)
 	echo "$(CURDIR)/reports/$$run/report.html"
 
 # The suites run on every core (pytest-xdist), a test file's tests on one worker (--dist loadfile:
-# module fixtures run once); TEST_WORKERS=1 runs them in one process.  `mbh warm-up` compiles the
-# in-house kernels and loops on every core (minutes once per machine and version of the kernels,
-# seconds after) while pytest runs beside it: a test's first use of a kernel waits for the
-# warm-up to end, so every test loads what it compiled (docs/speed.md, "What a first run
-# compiles"), and the files that need none run meanwhile (tests/conftest.py puts them first).
+# module fixtures run once); TEST_WORKERS=1 runs them in one process.  `mbh warm-up` first
+# compiles the in-house kernels and loops on every core (minutes once per machine and version of
+# the kernels, seconds after), so the workers load them instead of compiling them in turn.
 TEST_WORKERS ?= auto
 XDIST = $(if $(filter 1,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadfile)
 
 test: $(STAMP)
-	$(BIN)/mbh warm-up -- $(BIN)/python -m pytest $(XDIST)
+	$(BIN)/mbh warm-up
+	$(BIN)/python -m pytest $(XDIST)
 
 test-slow: $(STAMP)
 	$(BIN)/mbh warm-up

@@ -1,5 +1,4 @@
-"""Fixtures shared by every test folder: scenario variants written to temporary files; the order
-in which the test files run.
+"""Fixtures shared by every test folder: scenario variants written to temporary files.
 
 Plain helpers (constants and functions that tests import) live in :mod:`tests.helpers`."""
 
@@ -11,25 +10,6 @@ import pytest
 
 from mbh._harness.model import scenario
 from tests.helpers import variant_text
-
-
-#: Folders of tests/ whose files need, nearly all, no compiled kernel: they run first, so that
-#: under ``mbh warm-up -- pytest`` (make test) the workers have work while the warm-up compiles,
-#: and meet its gate (mbh._harness.common.warm_up_gate) as late as possible.  Measured in a
-#: suite run on 2026-11-29: these files made no process load a kernel, but for a third of
-#: tests/report's time.  A file placed wrongly only waits for the warm-up sooner.
-KERNEL_FREE_FOLDERS = ("report", "cli", "model", "outside", "jobs", "acceptance", "measure",
-                       "engines", "packaging")
-
-
-def pytest_collection_modifyitems(items) -> None:
-    """Files of :data:`KERNEL_FREE_FOLDERS` and the top-level files first, each group in its
-    collected order (pytest-xdist's workers take whole files in this order: --dist loadfile)."""
-    def late(item) -> bool:
-        parts = Path(item.path).relative_to(Path(__file__).parent).parts
-        return len(parts) > 1 and parts[0] not in KERNEL_FREE_FOLDERS
-
-    items.sort(key=late)
 
 
 @pytest.fixture

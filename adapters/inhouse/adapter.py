@@ -32,7 +32,6 @@ from mbh._adapters.inhouse.stepping.compiled_stepper import (
 from mbh._adapters.inhouse.stepping.driver import InhouseStepper
 from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
 from mbh._adapters.integrators import integrator_class, integrator_names, integrator_params
-from mbh._harness.common.warm_up_gate import wait_for_warm_up
 from mbh._adapters.inhouse.formulations.joint_coordinates import (COORDINATES, JOINT_LOOPS,
                                                                   JOINT_TREATMENTS,
                                                                   auto_coordinates,
@@ -197,9 +196,6 @@ class InhouseAdapter(Adapter):
         return spec.name != "ida" and not integrator_class(_split(spec.name)[0]).adaptive
 
     def _start(self, model: Mechanism, spec: MethodSpec, params: dict, grid: RunGrid) -> Stepper:
-        # Which loop and generated functions a run takes depends on what is compiled: while an
-        # `mbh warm-up` compiles them, decide after it (mbh._harness.common.warm_up_gate).
-        wait_for_warm_up()
         if spec.name == "ida":
             return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)

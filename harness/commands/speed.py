@@ -4,9 +4,6 @@ figures of :mod:`mbh._harness.jobs.bench`, measured in this run)."""
 from __future__ import annotations
 
 import argparse
-import os
-import subprocess
-import sys
 import time
 
 from mbh._harness.common.status import CaseStatus
@@ -36,9 +33,6 @@ def add_commands(sub) -> None:
     p.add_argument("--jobs", type=positive_int, default=None,
                    help="processes (default: the cores)")
     shared(p, "quiet", "json")
-    p.add_argument("command", nargs=argparse.REMAINDER, metavar="-- COMMAND",
-                   help="run COMMAND beside the compilation, its first use of a kernel waiting "
-                        "for it (make test runs pytest so); exit with COMMAND's code")
     p.set_defaults(func=warm_up)
 
     p = sub.add_parser("bench", help="speed: in-house front vs the best engine, adapter "
@@ -56,50 +50,23 @@ def add_commands(sub) -> None:
 def warm_up(args) -> int:
     """Compile the in-house kernels and loops ahead of the first runs
     (:mod:`mbh._harness.run.warm_up`) and say what each case compiled and how long it took; a
-    failed case is listed, not fatal.  With a command, run it beside the compilation
-    (:mod:`mbh._harness.common.warm_up_gate`: its first use of a kernel waits for the warm-up) and
-    return its exit code; the summary then goes to stderr, stdout being the command's."""
-    from mbh._harness.common import warm_up_gate
+    failed case is listed, not fatal."""
     from mbh._harness.run.executor import usable_cores
     from mbh._harness.run.warm_up import warm_up as compile_cases
 
-    command = args.command[1:] if args.command[:1] == ["--"] else args.command
-    if command and args.json:
-        raise exits.UsageError("mbh warm-up: --json with a command: the command's output is "
-                               "stdout; run the warm-up alone for its rows")
     began = time.perf_counter()
-    beside = None
-    try:
-        with warm_up_gate.closed():
-            if command:
-                beside = subprocess.Popen(command, stdout=_real_stdout(), env={
-                    key: value for key, value in os.environ.items()
-                    if key != warm_up_gate.WARMING_UP_ENV})
-            warmed = compile_cases(args.jobs or usable_cores())
-    finally:
-        code = beside.wait() if beside is not None else exits.OK
+    warmed = compile_cases(args.jobs or usable_cores())
     rows = [{"scenario": w.case.scene, "method": w.case.method, "compiles": w.case.what,
              "wall_time_s": w.seconds, "problem": w.problem} for w in warmed]
     if args.json:
         print_json(rows)
-        return code
+        return exits.OK
     problems = [row for row in rows if row["problem"]]
-    out = sys.stderr if command else sys.stdout
     print(f"warmed up: {len(rows)} cases in {time.perf_counter() - began:.0f} s"
-          f"{f', {len(problems)} failed' if problems else ''}", file=out)
+          f"{f', {len(problems)} failed' if problems else ''}")
     for row in problems:
-        print(f"  {row['scenario']} {row['method']}: {row['problem']}", file=out)
-    return code
-
-
-def _real_stdout() -> int | None:
-    """The descriptor of the command line's standard output (its answers' stream: descriptor 1
-    points at stderr during a command, :func:`mbh._harness.common.capture.answers_only_on_stdout`),
-    or None to inherit descriptor 1."""
-    try:
-        return sys.stdout.fileno()
-    except (AttributeError, OSError, ValueError):
-        return None
+        print(f"  {row['scenario']} {row['method']}: {row['problem']}")
+    return exits.OK
 
 
 def bench(args) -> int:

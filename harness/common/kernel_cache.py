@@ -48,7 +48,7 @@ import llvmlite
 import numba
 from numba.core import caching, event
 
-from mbh._harness.common import file_lock, warm_up_gate
+from mbh._harness.common import file_lock
 from mbh._harness.common.locations import (ADAPTERS_FOLDER, CODE_ROOT, HARNESS_FOLDER,
                                            generated_cache, user_cache)
 
@@ -170,8 +170,7 @@ def install() -> None:
 # -- one process compiles a function, the others wait and load it -----------------------------
 #
 # numba looks a function up in its cache (load_overload); on a miss it compiles it and saves it
-# (save_overload).  For the functions KernelCacheLocator places, a first look waits for a running
-# `mbh warm-up` (mbh._harness.common.warm_up_gate), and a miss takes the function's lock
+# (save_overload).  For the functions KernelCacheLocator places, a miss takes the function's lock
 # (mbh._harness.common.file_lock) and looks again: a process that waited finds what the holder saved
 # and loads it; else it keeps the lock while numba compiles, until the save (or a failed
 # compilation, _FailedCompileListener) releases it.  The call graph has no cycles, so two
@@ -189,11 +188,9 @@ def _lock_path(cache) -> Path:
 
 def _locking_load(load):
     def load_overload(self, sig, target_context):
-        kernel = getattr(self._impl.locator, "kernel", False)
-        if kernel:
-            warm_up_gate.wait_for_warm_up()
         data = load(self, sig, target_context)
-        if data is not None or not kernel:
+        locator = self._impl.locator
+        if data is not None or not getattr(locator, "kernel", False):
             return data  # found, or not a kernel (generated entries lock themselves)
         lock = file_lock.acquire(_lock_path(self))
         if lock is None:

@@ -65,7 +65,6 @@ from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 from mbh._harness.common.status import CaseStatus
-from mbh._harness.common.warm_up_gate import wait_for_warm_up
 from mbh._harness.common.progress import CaseProgress, progress_wanted
 
 #: Environment of every worker process: one thread per BLAS/OpenMP/numba pool, so timed cases
@@ -355,7 +354,6 @@ def run_isolated(work: Callable, spec, timeout_s: float, failure_row: Callable,
         The work's row and trajectory; or a ``timeout``/``crashed`` row and None.
     """
     workers = workers or WorkerProcesses(warm=False)
-    wait_for_warm_up()  # a case's wall-clock limit is its own, not a running warm-up's
     with tempfile.TemporaryDirectory(prefix="mbh-case-") as folder:
         result_path = Path(folder) / "result.pickle"
         worker = workers.start(work, spec, result_path)
