@@ -106,8 +106,9 @@ class InhouseAdapter(Adapter):
         return f"mbh-inhouse {_mbh_version()}"
 
     def methods(self) -> list[MethodSpec]:
-        specs = [MethodSpec("default", f"alias of {DEFAULT_METHOD}"),
-                 MethodSpec("best", f"alias of {BEST_METHOD}")]
+        in_joint = "; takes coords (joint, auto) alone"
+        specs = [MethodSpec("default", f"alias of {DEFAULT_METHOD}{in_joint}"),
+                 MethodSpec("best", f"alias of {BEST_METHOD}{in_joint}")]
         for integrator, strategy in itertools.product(integrator_names(), FORMULATIONS):
             specs.append(_spec(integrator, strategy))
         from mbh._adapters.inhouse.formulations.dae import ida_params
