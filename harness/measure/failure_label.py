@@ -2,11 +2,12 @@
 reference, on an overconstrained loop (:mod:`mbh._harness.neutral.conditioning` says where a
 scene is near-singular).
 
-The redundant joint equations at the assembled start are computed once per scene (by content
-hash; the warm template computes them for every case forked from it,
-:func:`mbh._harness.measure.verdict.prepare_reference`).  The reference's conditioning is not: an
-SVD of Φ_q at every reference sample, ~0.12 s a scene, which would delay every campaign's first
-case to spare the failed cases ~30 ms each.
+The redundant joint equations are counted at the shared start
+(:func:`mbh._harness.neutral.start.initial_state`, assembled once per scene and kept; the warm
+template assembles it for every case forked from it): ~1 ms, against ~5–9 ms when each failed case
+assembled the start again.  The reference's conditioning is computed by each failed case: an SVD
+of Φ_q at every reference sample, ~0.12 s a scene, which in the template would delay every
+campaign's first case to spare the failed cases ~30 ms each.
 """
 
 from __future__ import annotations
@@ -16,27 +17,18 @@ import dataclasses
 from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import Trajectory
-from mbh._harness.neutral.assembly import assemble
 from mbh._harness.neutral.conditioning import STOPPED, conditioning
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.neutral.mobility import independent_rows
-
-#: Content hash → (redundant, all) joint equations at the assembled start, of the scenes seen.
-_START_REDUNDANCY: dict[str, tuple[int, int]] = {}
+from mbh._harness.neutral.start import initial_state
 
 
 def start_redundancy(mech: Mechanism) -> tuple[int, int]:
-    """(redundant, all) joint equations of ``mech`` at its assembled start (full-pivot rank of
-    the joint Jacobian, :func:`~mbh._harness.neutral.mobility.independent_rows`); kept per
-    content hash."""
-    kept = _START_REDUNDANCY.get(mech.content_hash) if mech.content_hash else None
-    if kept is None:
-        start = assemble(mech).states
-        jacobian = JointEquations(mech).jacobian(start.position, start.quaternion)
-        kept = (jacobian.shape[0] - len(independent_rows(jacobian)), jacobian.shape[0])
-        if mech.content_hash:
-            _START_REDUNDANCY[mech.content_hash] = kept
-    return kept
+    """(redundant, all) joint equations of ``mech`` at its shared start (full-pivot rank of the
+    joint Jacobian, :func:`~mbh._harness.neutral.mobility.independent_rows`)."""
+    start = initial_state(mech)
+    jacobian = JointEquations(mech).jacobian(start.position, start.quaternion)
+    return jacobian.shape[0] - len(independent_rows(jacobian)), jacobian.shape[0]
 
 
 def label_failure(mech: Mechanism, trajectory: Trajectory,

@@ -56,7 +56,6 @@ import numpy as np
 from mbh._harness.measure.branch import BranchCheck, branch_distance, markers, reference_side
 from mbh._harness.measure.energy import energy_balance, energy_scale, has_quadrature_loads, \
     reference_quadrature_work
-from mbh._harness.measure.failure_label import start_redundancy
 from mbh._harness.measure.metrics import reference_outputs, violation_series
 from mbh._harness.model.mechanism import Mechanism, characteristic_length
 from mbh._harness.model.outputs import rotation_between
@@ -269,8 +268,7 @@ def _stick_checks(mech, trajectory, reference, bounds, notes) -> list[Check]:
 
 def prepare_reference(mech: Mechanism, reference: Trajectory) -> None:
     """Compute now what judging and measuring a run of ``mech`` derive from ``reference`` alone
-    (the energy scale and baseline, the branch check's reference side, the outputs, the start's
-    redundancy a failed run's label reads); kept for a
+    (the energy scale and baseline, the branch check's reference side, the outputs); kept for a
     frozen reference (:mod:`mbh._harness.measure.per_reference`), so that the warm template computes
     them once for every case forked from it."""
     energy_scale(mech, reference)
@@ -278,7 +276,6 @@ def prepare_reference(mech: Mechanism, reference: Trajectory) -> None:
         reference_quadrature_work(mech, reference)
     reference_side(mech, reference)
     reference_outputs(mech, reference)
-    start_redundancy(mech)  # what a failed run's label reads
 
 
 def judge(mech: Mechanism, trajectory: Trajectory, reference: Trajectory | None = None,

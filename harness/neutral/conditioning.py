@@ -24,8 +24,8 @@ from scipy.signal import find_peaks
 
 from mbh._harness.neutral.equations import JointEquations
 from mbh._harness.model.mechanism import Mechanism
-from mbh._harness.common.status import CaseStatus
 from mbh._harness.neutral.mobility import independent_rows
+from mbh._harness.common.status import CaseStatus
 from mbh._harness.model.trajectory import Trajectory
 
 #: Fraction of its median at or below which a local minimum of σ_r/σ_1 counts as a near-singular
