@@ -49,6 +49,12 @@ def show_on_stderr(quiet: bool = False) -> None:
     LOG.setLevel(logging.WARNING if quiet else logging.INFO)
 
 
+def shown_on_stderr() -> bool:
+    """Whether this process says its waits on stderr (:func:`show_on_stderr`, not quiet)."""
+    return LOG.isEnabledFor(logging.INFO) and any(getattr(handler, "_mbh_stderr", False)
+                                                  for handler in LOG.handlers)
+
+
 def duration(seconds: float) -> str:
     """``seconds`` as a person reads a wait: ``40 s``, ``3 min``."""
     if seconds < 90:

@@ -64,6 +64,7 @@ from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
+from mbh._harness.common import waits
 from mbh._harness.common.status import CaseStatus
 from mbh._harness.common.progress import CaseProgress, progress_wanted
 
@@ -79,6 +80,10 @@ WARM_SCENARIOS_ENV = "MBH_WARM_SCENARIOS"
 #: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template which
 #: methods to run once before its first fork: a JSON list of [scenario, adapter, method, dt].
 WARM_METHODS_ENV = "MBH_WARM_METHODS"
+#: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template to say
+#: its waits on stderr (its compilations on a machine where the kernels are not compiled yet), as
+#: the starting process does: "1", or empty for silence (``--quiet``).
+WARM_SAY_ENV = "MBH_WARM_SAY"
 
 
 @contextlib.contextmanager
@@ -261,7 +266,8 @@ class WorkerProcesses:
         server = multiprocessing.forkserver._forkserver
         before = getattr(server, "_forkserver_pid", None)
         told = {WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios))),
-                WARM_METHODS_ENV: json.dumps([list(method) for method in methods])}
+                WARM_METHODS_ENV: json.dumps([list(method) for method in methods]),
+                WARM_SAY_ENV: "1" if waits.shown_on_stderr() else ""}
         with contextlib.suppress(OSError, EOFError, ValueError), _environment(told):
             multiprocessing.forkserver.ensure_running()
             return getattr(server, "_forkserver_pid", None) not in (None, before)

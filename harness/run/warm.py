@@ -2,8 +2,8 @@
 (:mod:`multiprocessing.forkserver`, the ``preload`` of
 :class:`mbh._harness.run.executor.WorkerProcesses`), it sets the one-thread environment, imports numpy,
 scipy, the harness and every registered engine, runs a few tiny cases so the compiled in-house
-kernels are loaded from numba's cache, runs each of the campaign's methods for a few steps so
-what it loads on its first run is loaded once, and reads the campaign's scenarios and their stored
+kernels are loaded from numba's cache, runs each of the campaign's methods over one sample
+interval so what it loads on its first run is loaded once, and reads the campaign's scenarios and their stored
 references (:mod:`mbh._harness.common.kept_files`), assembles their starts and computes what the
 measuring stick derives from each reference alone.  Each case's process is then forked from this
 state: a fresh process per case (a crash stays a row) that starts in milliseconds instead of
@@ -19,10 +19,15 @@ import json
 import multiprocessing.spawn
 import os
 
-from mbh._harness.run.executor import WORKER_ENV
+from mbh._harness.common import waits
+from mbh._harness.run.executor import WARM_SAY_ENV, WORKER_ENV
 
 # Before numpy and the engines load their thread pools: one thread per case.
 os.environ.update(WORKER_ENV)
+# A compilation below (a machine where the kernels are not compiled yet) is said as the starting
+# process says its own waits: the cases wait for this template.
+if os.environ.get(WARM_SAY_ENV):
+    waits.show_on_stderr()
 
 #: The parts of multiprocessing's child preparation that re-run the starting process's main
 #: module in the child: a user's script, or ``mbh._harness.cli``.  A case's process never needs it (its

@@ -10,7 +10,7 @@ import subprocess
 import sys
 
 from mbh._harness.run.campaign import first_runs
-from mbh._harness.run.executor import WARM_METHODS_ENV, WARM_SCENARIOS_ENV
+from mbh._harness.run.executor import WARM_METHODS_ENV, WARM_SAY_ENV, WARM_SCENARIOS_ENV
 from mbh._harness.run.spec import load_campaign
 
 
@@ -68,3 +68,20 @@ def test_first_runs_name_each_method_of_a_campaign_once_with_its_first_case():
                              for method in methods})
     first = campaign.cases[0]
     assert runs[0] == (first.scenario, first.adapter, first.method, first.dt)
+
+
+def test_the_template_says_its_waits_when_its_starting_process_does():
+    """On a machine where the kernels are not compiled yet the template compiles them before any
+    case can start: it says so on stderr as the starting process would (not under --quiet)."""
+    script = """
+import mbh._harness.run.warm
+from mbh._harness.common import waits
+print(waits.shown_on_stderr())
+"""
+    said = {}
+    for value in ("1", ""):
+        env = os.environ | {WARM_SAY_ENV: value}
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                              text=True, check=True)
+        said[value] = done.stdout.strip()
+    assert said == {"1": "True", "": "False"}
