@@ -35,7 +35,8 @@ def add_commands(sub) -> None:
     shared(p, "quiet", "json")
     p.set_defaults(func=warm_up)
 
-    p = sub.add_parser("bench", help="speed: in-house front vs the best engine, adapter "
+    p = sub.add_parser("bench", help="speed: in-house front vs the best engine (and the "
+                                     "in-house formulation in both coordinates), adapter "
                                      "overheads, generated-loop fallbacks, scaling on "
                                      "n_fourbar@N, reference build times")
     p.add_argument("--parts", type=bench_parts, default=",".join(BENCH_PARTS),
@@ -100,6 +101,7 @@ def bench(args) -> int:
 
 def _front(args) -> None:
     """The in-house front against the best engine, per scenario, from a run of ``bench``."""
+    from mbh._harness.report.coordinates import coordinates_table
     from mbh._harness.report.summary import front_ratio_table
     from mbh._harness.run.campaign import run_campaign
     from mbh._harness.run.spec import load_campaign
@@ -109,11 +111,17 @@ def _front(args) -> None:
     cases = store.cases()
     print(f"fronts from run {store.run_id} ({len(cases)} cases, {status_counts(cases)})")
     for name in sorted(cases["scenario"].unique()):
-        table = front_ratio_table(cases, name)
-        print(f"\n{table.caption}")
-        rows = [dict(zip(table.columns, (format_number(v) if isinstance(v, float) else v
-                                         for v in row))) for row in table.rows]
-        print_table(rows, list(table.columns))
+        for table in (front_ratio_table(cases, name), coordinates_table(cases, name)):
+            if table is not None:
+                _print_report_table(table)
+
+
+def _print_report_table(table) -> None:
+    """A report :class:`~mbh._harness.report.summary.Table` on stdout: caption, then rows."""
+    print(f"\n{table.caption}")
+    rows = [dict(zip(table.columns, (format_number(v) if isinstance(v, float) else v
+                                     for v in row))) for row in table.rows]
+    print_table(rows, list(table.columns))
 
 
 def _scaling(figures, members: tuple[int, ...]) -> None:

@@ -28,7 +28,7 @@ import pandas as pd
 from mbh._harness.common.status import CaseStatus
 from mbh._harness.model import scenario as scenarios
 from mbh._harness.store.reference_files import stored_reference
-from mbh._harness.report import failures, figures, mechanism, seed_compare, summary
+from mbh._harness.report import coordinates, failures, figures, mechanism, seed_compare, summary
 from mbh._harness.report.summary import Table
 from mbh._harness.model.scenario import ScenarioError
 from mbh._harness.measure.verdict import DEFAULT_ACCURACY
@@ -92,6 +92,7 @@ class Report:
     stability: list[figures.Figure]
     histories: list[figures.Figure]
     model_size: Table
+    coordinates: list[Table]
     mechanisms: list[MechanismView]
     seed: dict
     environment: list[tuple[str, str]]
@@ -338,7 +339,10 @@ def collect(run_id: str, against: str | None = None, root: Path | None = None,
         pareto=summary.pareto_table(cases),
         status_counts=summary.status_counts_table(cases), failures=summary.failures_table(cases),
         changes=None, work_precision=[], stability=[], histories=[],
-        model_size=summary.model_size_table(cases, accuracy), mechanisms=[],
+        model_size=summary.model_size_table(cases, accuracy),
+        coordinates=[table for table in (coordinates.coordinates_table(cases, name)
+                                         for name in names) if table is not None],
+        mechanisms=[],
         seed=_seed_section(store), environment=_environment(manifest),
         scenario_hashes=_hashes_table(manifest), campaign_text=manifest.get("campaign_text") or "",
         cases=summary.cases_table(cases, calibration))

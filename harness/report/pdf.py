@@ -146,6 +146,10 @@ def _story(report, width: float) -> list:
     story += [_text("Time histories", h2), *(_figure(fig, width) for fig in report.histories),
               *_omitted(report, "histories")]
     story += [_text("Model size and cost", h2), *_table(report.model_size, width)]
+    if report.coordinates:
+        story.append(_text("The in-house formulation in both coordinates", h3))
+    for table in report.coordinates:
+        story += _table(table, width)
     story += [_text("Mechanisms", h2),
               _text("The animations are in the HTML report.", _NOTE)]
     for view in report.mechanisms:
