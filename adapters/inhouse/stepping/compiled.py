@@ -327,7 +327,7 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
     return _checked(q, v, q_new, v_new, limit)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection, partition,
              check_due, limit, passage, counters, q_out, v_out):
     """The stepping loop of :func:`run_steps` and :func:`run_samples`: from the state after step

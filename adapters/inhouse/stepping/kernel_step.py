@@ -144,7 +144,7 @@ def count_evaluation(counters):
     counters[FACTORIZATIONS] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kernel_acceleration(q, v, t, model, counters):
     """q̈ of the index-1 form by the kernel (:func:`index1_acceleration`), for a call the
     generated right-hand side declined (a guard failed, or ``NEVER``)."""
@@ -154,7 +154,7 @@ def kernel_acceleration(q, v, t, model, counters):
                                model[DYNAMICS_ARGS], model[SPARSITY])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _partitioned_acceleration(q_ind, v_ind, t, model, partition, counters):
     """q̈ of the independent coordinates: the full state by :func:`expand`, then its q̈ from the
     generated right-hand side where it serves, else from the kernel."""
@@ -168,7 +168,7 @@ def _partitioned_acceleration(q_ind, v_ind, t, model, partition, counters):
     return a[partition[0]]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kernel_nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters):
     """One step of :func:`mbh._adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
     operation order (so to the same bits), without a temporary array per tableau coefficient.
