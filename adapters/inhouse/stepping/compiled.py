@@ -90,8 +90,8 @@ def _generated_projection(states, s, t, proj_tol, proj_max_iter, generated, scra
 @njit(cache=True)
 def _generated_run(k, targets, reached, t0, dt, tableau, generated, stabilisation, projection,
                    limit, passage, counters, buffers, q_out, v_out):
-    """The steps of :func:`_advance` from step ``k`` on the generated functions alone, in one
-    flat loop that keeps the state at each target as :func:`_advance` does: the steps of
+    """The steps of :func:`run_samples` from step ``k`` on the generated functions alone, in one
+    flat loop that keeps the state at each target as :func:`run_samples` does: the steps of
     :func:`_step_and_check` (the same operations, so the same bits; the counters and ρ̂ updated
     as it updates them) until the last target, a step before which a passage is planned
     (:func:`plan_passage`), a step one of the functions declines, or a diverged step.
@@ -327,15 +327,36 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
     return _checked(q, v, q_new, v_new, limit)
 
 
-@njit(cache=True, inline="always")
-def _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection, partition,
-             check_due, limit, passage, counters, q_out, v_out):
-    """The stepping loop of :func:`run_steps` and :func:`run_samples`: from the state after step
-    ``first`` through every step index of ``targets`` (increasing, none before ``first``),
-    keeping the state at each in the rows of ``q_out``, ``v_out``; returns what
-    :func:`run_samples` returns.  A placed passage ends by the next target.  One call for a
-    whole run: a call of :func:`run_steps` per sample, passing the model's ~40 arrays each time,
-    cost 0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).
+@njit(cache=True)
+def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
+                partition, check_due, limit, passage, counters, q_out, v_out):
+    """:func:`run_steps` from step ``first`` on through every step index of ``targets``, keeping
+    the state at each: a whole run in one call, for formulations whose states are read without
+    side effects (every one but partitioning, whose reading moves its Newton start).
+
+    Parameters
+    ----------
+    targets : ndarray of int64, shape (k,)
+        Increasing step indices, none before ``first``.
+    q_out, v_out : ndarray, shape (k, n)
+        Row i receives the state after step ``targets[i]``; rows from ``reached`` on are left
+        as they were.
+    (the others as :func:`run_steps`)
+
+    Returns
+    -------
+    q, v, done, status
+        As :func:`run_steps` returns them, ``status`` :data:`RUNNING` when every target was
+        reached.
+    reached : int
+        Number of targets whose state was stored.
+
+    One call for a whole run: a call of :func:`run_steps` per sample, passing the model's ~40
+    arrays each time, cost 0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).
+    The stepping loop is written here, not in a function that both entries call: numba compiles a
+    called function into a library of its own and then the caller's library again with all of it
+    linked in, so a wrapper of a few lines cost as much compile time as the loop (docs/speed.md).
+    A placed passage ends by the next target.
     """
     placement, rho_zone, indicators, passages = passage
     buffers = _step_buffers(tableau, q)
@@ -440,36 +461,8 @@ def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projecti
         :data:`RUNNING` when step ``last`` was reached, :data:`REPARTITION` when the split must
         be chosen again before step ``done + 1``, else the code of the failure in that step.
     """
-    q, v, done, status, _ = _advance(q, v, t0, dt, first, np.array([last]), tableau, model,
-                                     stabilisation, projection, partition, check_due, limit,
-                                     passage, counters, np.empty((1, q.shape[0])),
-                                     np.empty((1, v.shape[0])))
+    q, v, done, status, _ = run_samples(q, v, t0, dt, first, np.array([last]), tableau, model,
+                                        stabilisation, projection, partition, check_due, limit,
+                                        passage, counters, np.empty((1, q.shape[0])),
+                                        np.empty((1, v.shape[0])))
     return q, v, done, status
-
-
-@njit(cache=True)
-def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
-                partition, check_due, limit, passage, counters, q_out, v_out):
-    """:func:`run_steps` from step ``first`` on through every step index of ``targets``, keeping
-    the state at each: a whole run in one call, for formulations whose states are read without
-    side effects (every one but partitioning, whose reading moves its Newton start).
-
-    Parameters
-    ----------
-    targets : ndarray of int64, shape (k,)
-        Increasing step indices, none before ``first``.
-    q_out, v_out : ndarray, shape (k, n)
-        Row i receives the state after step ``targets[i]``; rows from ``reached`` on are left
-        as they were.
-    (the others as :func:`run_steps`)
-
-    Returns
-    -------
-    q, v, done, status
-        As :func:`run_steps` returns them, ``status`` :data:`RUNNING` when every target was
-        reached.
-    reached : int
-        Number of targets whose state was stored.
-    """
-    return _advance(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
-                    partition, check_due, limit, passage, counters, q_out, v_out)

@@ -168,7 +168,7 @@ def _partitioned_acceleration(q_ind, v_ind, t, model, partition, counters):
     return a[partition[0]]
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def kernel_nystrom_step(q, v, t, h, tableau, model, partition, stabilisation, counters):
     """One step of :func:`mbh._adapters.integrators.nystrom.nystrom_step`, entry by entry in the same
     operation order (so to the same bits), without a temporary array per tableau coefficient.
