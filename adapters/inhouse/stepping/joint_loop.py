@@ -131,7 +131,7 @@ class JointLoopStepper(FormulationStepper):
         #: (θ, θ̇, done, status, reached) of the run's call, once made.
         self._end: tuple | None = None
         self._row = 0
-        self.notes.append(COMPILED_NOTE)
+        self.notes.insert(1, COMPILED_NOTE)  # beside the model note, before the treatment's
 
     # -- stepping ------------------------------------------------------------------------------
     def _step_to(self, t: float) -> None:

@@ -27,7 +27,7 @@ class JointStepper(InhouseStepper):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        self.notes.append(PYTHON_NOTE)
+        self.notes.insert(1, PYTHON_NOTE)  # beside the model note, before the treatment's
 
     def _coordinates(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         integrator = self.integrator
