@@ -140,7 +140,9 @@ def run_one_step_samples(theta, rate, t0, dt, first, targets, tableau, model, pr
     states, stage = np.empty((2, 2, n)), np.empty((1, 2, n))
     stages = np.empty((tableau[0].shape[0], n))
     hold_state(states, 0, theta, rate)
-    current, k, reached = 0, first, 0
+    # The slot of the current state typed int64 from the start: a literal 0 has numba compile
+    # _nystrom_into twice, for Literal[int](0) and for int64 (10 s of compilation in all).
+    current, k, reached = np.int64(0), first, 0
     while True:
         reached = _keep_targets(states, current, k, targets, reached, theta_out, rate_out)
         if reached == targets.shape[0]:
@@ -174,7 +176,7 @@ def run_adams_bashforth_samples(theta, rate, t0, dt, first, targets, method, mod
     states, stage = np.empty((2, 2, n)), np.empty((1, 2, n))
     stages = np.empty((start_tableau[0].shape[0], n))
     hold_state(states, 0, theta, rate)
-    current, k, reached = 0, first, 0
+    current, k, reached = np.int64(0), first, 0  # int64 from the start: run_one_step_samples
     while True:
         reached = _keep_targets(states, current, k, targets, reached, theta_out, rate_out)
         if reached == targets.shape[0]:
