@@ -66,7 +66,13 @@ def _acceleration(theta, rate, t, model):
 def _nystrom_into(states, current, new, stage, stages, t, h, tableau, model, counters):
     """One step of the Nyström ``tableau`` (:func:`~.kernel_step.step_tableau`) from
     (θ, θ̇) = ``states[current]`` at t by h into ``states[new]`` ((2, 2, n_θ)); ``stage``
-    (1, 2, n_θ) and ``stages`` (s, n_θ) are the run's buffers."""
+    (1, 2, n_θ) and ``stages`` (s, n_θ) are the run's buffers.
+
+    Not inlined, nor is :func:`_project_into`, although inlined they compiled faster (the
+    Adams–Bashforth loop after the right-hand side in 11 s against 16 s): each holds a call that
+    raises (a solve), and the loops call them inside ``try``; numba 0.68.1's inlined code there
+    does not leave for the handler at the raise (the loop counted a right-hand side more than the
+    Python loop after a failed solve, and a minimal loop of that shape crashed the process)."""
     c, velocity_table, position_table = tableau
     count = c.shape[0]
     for i in range(count):

@@ -42,9 +42,8 @@ JOINT_LOOP_TREATMENTS = ("none", "baumgarte", "direct")
 #: What the announcement of the loop's first compilation says to expect, s: Adams–Bashforth's
 #: loop on Bricard took 61 s on an empty cache, 46 s of it the joint right-hand side it calls
 #: (benchmarks/compile_cost.py, 2-core machine, 2026-11-29); once the Python loop has compiled
-#: that right-hand side, 18 s (ab5), then 5 s (rk4, whose steps ab5's start shares) and 24 s
-#: (rk4+direct: the projection's solves), measured before the loops' slot index was made int64
-#: from the start (which saved 5 s of the first).
+#: that right-hand side, 16 s (ab5), then 6 s (rk4) and 24 s (rk4+direct: the projection's
+#: solves).
 JOINT_LOOP_S = 60.0
 #: The run's note on its loop.
 COMPILED_NOTE = "joint coordinates stepped on their compiled loop (one compiled call a run)"
