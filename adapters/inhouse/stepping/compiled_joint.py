@@ -24,7 +24,9 @@ for ``none`` and ``baumgarte``:
 
 Arguments shared by the loops: θ, θ̇ (n_θ,) the state after step ``first``; t0, dt (s), step k
 ending at t0 + k·dt; ``targets`` (k,) int64 increasing step indices whose states go to the rows
-of ``theta_out``, ``rate_out`` (k, n_θ); ``model`` the arguments after (θ, θ̇, t) of
+of ``theta_out``, ``rate_out`` (k, n_θ), and the counters after them to the rows of
+``counters_out`` (k, :data:`~.loop_codes.COUNTERS`) int64 (a run the harness stops at a sample
+reports the cost up to there, as the Python loop, which has stepped no further); ``model`` the arguments after (θ, θ̇, t) of
 :func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel` (its ``tree``,
 ``dynamics``, ``closure``, ``m_c``, ``gains``, ``cut``);
 ``projection`` None (``none``, ``baumgarte``: its code is then not compiled) or (proj_tol,
@@ -86,6 +88,18 @@ def _nystrom_into(states, current, new, stage, stages, t, h, tableau, model, cou
                    velocity_table, count)
 
 
+@njit(cache=True, inline="always")
+def _keep(states, current, k, targets, reached, theta_out, rate_out, counters, counters_out):
+    """:func:`~.compiled._keep_targets`, and the counters at each target kept into its row of
+    ``counters_out``; the new count of targets reached (inlined: assignments only, called
+    outside the loops' ``try``)."""
+    kept = _keep_targets(states, current, k, targets, reached, theta_out, rate_out)
+    for row in range(reached, kept):
+        for c in range(counters.shape[0]):
+            counters_out[row, c] = counters[c]
+    return kept
+
+
 @njit(cache=True)
 def _closure_jacobian(theta, t, tree, closure, m_c, counters):
     """C_θ = Φ_cut,q B (m_c, n_θ) at θ, and g(θ) (n,)."""
@@ -138,7 +152,7 @@ def _project_into(states, s, t, model, projection, counters):
 
 @njit(cache=True)
 def run_one_step_samples(theta, rate, t0, dt, first, targets, tableau, model, projection, limit,
-                         counters, theta_out, rate_out):
+                         counters, theta_out, rate_out, counters_out):
     """A fixed-step run of the explicit Nyström method ``tableau``
     (:func:`~.kernel_step.step_tableau`: c (s,), A⁺, Ā⁺ (s + 1, s)); the other arguments and the
     results as the module docstring says."""
@@ -150,7 +164,8 @@ def run_one_step_samples(theta, rate, t0, dt, first, targets, tableau, model, pr
     # _nystrom_into twice, for Literal[int](0) and for int64 (10 s of compilation in all).
     current, k, reached = np.int64(0), first, 0
     while True:
-        reached = _keep_targets(states, current, k, targets, reached, theta_out, rate_out)
+        reached = _keep(states, current, k, targets, reached, theta_out, rate_out, counters,
+                        counters_out)
         if reached == targets.shape[0]:
             return states[current, 0].copy(), states[current, 1].copy(), k, RUNNING, reached
         t, t_new = t0 + k * dt, t0 + (k + 1) * dt
@@ -171,7 +186,7 @@ def run_one_step_samples(theta, rate, t0, dt, first, targets, tableau, model, pr
 
 @njit(cache=True)
 def run_adams_bashforth_samples(theta, rate, t0, dt, first, targets, method, model, projection,
-                                limit, counters, theta_out, rate_out):
+                                limit, counters, theta_out, rate_out, counters_out):
     """A fixed-step run of an explicit linear multistep method (β₀ = 0), ``method`` as
     :func:`.compiled_multistep.method_arguments` makes it (α, β, the RK4 start tableau and the
     history (points, 2, 2n_θ) with its count ``held`` (1,), updated in place; its Newton members
@@ -184,7 +199,8 @@ def run_adams_bashforth_samples(theta, rate, t0, dt, first, targets, method, mod
     hold_state(states, 0, theta, rate)
     current, k, reached = np.int64(0), first, 0  # int64 from the start: run_one_step_samples
     while True:
-        reached = _keep_targets(states, current, k, targets, reached, theta_out, rate_out)
+        reached = _keep(states, current, k, targets, reached, theta_out, rate_out, counters,
+                        counters_out)
         if reached == targets.shape[0]:
             return states[current, 0].copy(), states[current, 1].copy(), k, RUNNING, reached
         t, t_new = t0 + k * dt, t0 + (k + 1) * dt

@@ -124,13 +124,17 @@ class JointLoopStepper(FormulationStepper):
         self._rows = dict(zip(targets.tolist(), range(targets.size)))
         self._theta_out = np.empty((targets.size, theta.size))
         self._rate_out = np.empty((targets.size, theta.size))
+        #: The counters after each target's step: the cost up to the sample the run is at.
+        self._counters_out = np.zeros((targets.size, loop_codes.COUNTERS), dtype=np.int64)
         self._args = (theta, rate, 0.0, grid.dt, 0, targets, method, formulation.kernel_args,
-                      projection, self._limit, self._counters, self._theta_out, self._rate_out)
+                      projection, self._limit, self._counters, self._theta_out, self._rate_out,
+                      self._counters_out)
         self._entry = on_demand.entry(dispatcher, self._args, "the joint-coordinate loop",
                                       JOINT_LOOP_S)
         #: (θ, θ̇, done, status, reached) of the run's call, once made.
         self._end: tuple | None = None
-        self._row = 0
+        #: Row of the kept states the run is at (None: the end of the call, after a failure).
+        self._row: int | None = 0
         self.notes.insert(1, COMPILED_NOTE)  # beside the model note, before the treatment's
 
     # -- stepping ------------------------------------------------------------------------------
@@ -146,6 +150,7 @@ class JointLoopStepper(FormulationStepper):
         _, _, done, status, reached = self._end
         if row >= reached:
             self.steps, self.t_good = done, done * self.grid.dt
+            self._row = None  # the counters at the failure: the whole call's
             raise RunFailure(*self._failure(status, done))
         self._row, self.steps, self.t_good = row, target, target * self.grid.dt
 
@@ -185,7 +190,11 @@ class JointLoopStepper(FormulationStepper):
             self.t_good, self._theta_out[row], self._rate_out[row]))
 
     def counters(self) -> dict:
-        own, spent = self.formulation.counters, self._counters
+        """The cost up to the state the run is at: the counters kept with the sample read last
+        (the call ran on to the end, or to its failure, which the Python loop would not have
+        reached if the run stopped at that sample), or the whole call's after a failure."""
+        own = self.formulation.counters
+        spent = self._counters if self._row is None else self._counters_out[self._row]
         return {"rhs_evals": int(spent[loop_codes.RHS_EVALS]),
                 "jacobian_evals": own["jacobian_evals"] + int(spent[loop_codes.JACOBIAN_EVALS]),
                 "factorizations": own["factorizations"] + int(spent[loop_codes.FACTORIZATIONS]),

@@ -122,16 +122,17 @@ def test_a_divergence_is_the_python_loops(method):
 def test_a_divergence_the_run_loop_finds_is_the_python_loops(method):
     """Baumgarte's α = β = 1e4 at 1e-2 s on Bricard: the steps blow up, and the run loop's check
     of the body states stops the run at a sample (measured: "velocity 8.11e+96 m/s exceeds
-    1e+08" after 3 steps for rk4).  The same status, reason, failure time, steps and samples on
-    both loops; not the counters: the compiled loop integrated on past that sample before the
-    check read it (16 right-hand sides against 12 for rk4)."""
+    1e+08" after 3 steps for rk4).  The same status, reason, failure time, steps, samples and
+    counters on both loops: the compiled loop integrated on past that sample before the check
+    read it (16 right-hand sides against 12 for rk4), and reports its counters kept there."""
     mech = scenario.load("bricard")
     runs = [simulate(mech, f"{method}:coords=joint,loop={loop},auto=0,alpha=1e4,beta=1e4",
                      1e-2, 1.0) for loop in ("python", "compiled")]
     python, compiled = runs
     assert python.status == "diverged" and "exceeds" in python.reason, python.reason
-    assert (compiled.status, compiled.reason, compiled.failure_time, compiled.steps) == \
-        (python.status, python.reason, python.failure_time, python.steps)
+    assert (compiled.status, compiled.reason, compiled.failure_time, compiled.steps,
+            compiled.counters) == (python.status, python.reason, python.failure_time,
+                                   python.steps, python.counters)
     np.testing.assert_array_equal(compiled.velocity, python.velocity)
 
 
