@@ -15,7 +15,10 @@ methods to their Newton tolerance: :mod:`mbh._adapters.inhouse.stepping.compiled
 ``none``, ``baumgarte``, ``direct`` and ``partition`` also take ``coords=joint``: the same
 treatment in the spanning tree's joint coordinates
 (:mod:`mbh._adapters.inhouse.formulations.joint_coordinates`,
-:mod:`mbh._adapters.inhouse.formulations.joint_partition`), on the Python loop.
+:mod:`mbh._adapters.inhouse.formulations.joint_partition`), on their compiled loop where it runs the
+method (the explicit one-step methods and ab1–ab5 with ``none``, ``baumgarte`` or ``direct``:
+:mod:`mbh._adapters.inhouse.stepping.joint_loop`; ``loop=auto`` or ``compiled``), else, and with
+``loop=python``, on the Python loop.
 """
 
 from __future__ import annotations
@@ -30,6 +33,8 @@ from mbh._adapters.base import Adapter, MethodSpec, RunGrid, Stepper, Unsupporte
 from mbh._adapters.inhouse.stepping.compiled_stepper import (
     LOOPS, CompiledStepper, has_compiled_path)
 from mbh._adapters.inhouse.stepping.driver import InhouseStepper
+from mbh._adapters.inhouse.stepping.joint_loop import (JointLoopStepper, joint_loop,
+                                                       joint_loop_unsupported)
 from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
 from mbh._adapters.integrators import integrator_class, integrator_names, integrator_params
 from mbh._adapters.inhouse.formulations.joint_coordinates import (COORDINATES, JOINT_LOOPS,
@@ -83,8 +88,9 @@ def _spec(integrator: str, strategy: str) -> MethodSpec:
         params["loop"] = LOOPS[0]
     if strategy in JOINT_FORMULATIONS:
         params["coords"] = COORDINATES[0]
-        description += ("; coords=joint: in the spanning tree's joint coordinates (Python loop), "
-                        "coords=auto: the smaller model")
+        description += ("; coords=joint: in the spanning tree's joint coordinates (their "
+                        "compiled loop where it runs the method, else Python), coords=auto: the "
+                        "smaller model")
     return MethodSpec(f"{integrator}+{strategy}", description, params)
 
 
@@ -155,8 +161,8 @@ class InhouseAdapter(Adapter):
         """:meth:`model_size`, or the joint-coordinate model's size
         (:func:`~mbh._adapters.inhouse.formulations.joint_coordinates.joint_model_size`) when
         ``method`` runs in joint coordinates (``coords=joint``, or ``auto`` choosing them)."""
-        _, params = self.method_spec(method)
-        if self._coordinates(model, params)[0] != "joint":
+        spec, params = self.method_spec(method)
+        if self._coordinates(model, spec.name, params)[0] != "joint":
             return self.model_size(model)
         from mbh._adapters.inhouse.bodies.kinematics import common_start
 
@@ -173,19 +179,25 @@ class InhouseAdapter(Adapter):
         if coords not in COORDINATES:
             raise ValueError(f"parameter 'coords' of {spec.name!r} must be one of "
                              f"{', '.join(COORDINATES)}, got {coords!r}")
-        if coords == "joint" and params.get("loop", "python") not in JOINT_LOOPS:
-            raise ValueError(f"parameter 'coords' of {spec.name!r}: coords=joint runs on the "
-                             f"Python loop only (loop=auto or loop=python), got "
-                             f"loop={params['loop']}")
+        loop = params.get("loop", "python")
+        if coords == "joint" and joint_loop(*_split(spec.name), loop) is None:
+            why = (joint_loop_unsupported(*_split(spec.name)) if loop == "compiled" else
+                   "there are no generated functions in joint coordinates")
+            raise ValueError(f"parameter 'loop' of {spec.name!r}: coords=joint has no loop={loop}"
+                             f" ({why}); it takes loop={' or loop='.join(JOINT_LOOPS)} where "
+                             "auto is the compiled loop where it runs the method, else Python")
         if spec.name == "ida":
             from mbh._adapters.inhouse.formulations.dae import check_ida_params
             check_ida_params(params)
 
     def bare_loop(self, model: Mechanism, method: str, dt: float, n_steps: int) -> float:
-        """The compiled loop alone: ``n_steps`` steps in one call (methods on the compiled path;
-        the Python path, ``loop=python``, has no loop apart from the adapter's)."""
+        """The compiled loop alone: ``n_steps`` steps in one call (methods on the compiled path,
+        the joint coordinates' one included; the Python path, ``loop=python``, has no loop apart
+        from the adapter's)."""
         spec, params = self.method_spec(method)
-        if params.get("loop", "python") == "python" or self._coordinates(model, params)[0] == "joint":
+        loop = params.get("loop", "python")
+        joint = self._coordinates(model, spec.name, params)[0] == "joint"
+        if loop == "python" or (joint and joint_loop(*_split(spec.name), loop) != "compiled"):
             raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
                                   "the adapter's")
         stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
@@ -200,7 +212,7 @@ class InhouseAdapter(Adapter):
         if spec.name == "ida":
             return _IdaStepper(model, params, grid)
         integrator, strategy = _split(spec.name)
-        coords, note = self._coordinates(model, params)
+        coords, note = self._coordinates(model, spec.name, params)
         joint = coords == "joint"
         formulation = (JOINT_FORMULATIONS if joint else FORMULATIONS)[strategy]
         reason = formulation.unsupported_reason(model, integrator_class(integrator))
@@ -210,7 +222,9 @@ class InhouseAdapter(Adapter):
         rest = {k: v for k, v in params.items()
                 if k not in formulation.defaults and k not in ("loop", "coords")}
         loop = params.get("loop", "python")
-        if joint:  # the Python loop over the joint-coordinate model
+        if joint and joint_loop(integrator, strategy, loop) == "compiled":
+            stepper = JointLoopStepper(model, formulation, integrator, rest, own, grid)
+        elif joint:
             stepper = JointStepper(model, formulation, integrator, rest, own, grid)
         elif loop == "python":
             stepper = InhouseStepper(model, formulation, integrator, rest, own, grid)
@@ -221,14 +235,15 @@ class InhouseAdapter(Adapter):
         return stepper
 
     @staticmethod
-    def _coordinates(model: Mechanism, params: dict) -> tuple[str, str]:
+    def _coordinates(model: Mechanism, spec_name: str, params: dict) -> tuple[str, str]:
         """The coordinates a run takes (``coords``; ``auto`` resolved by
         :func:`~mbh._adapters.inhouse.formulations.joint_coordinates.auto_coordinates`) and the
         note saying why, empty when the method named them."""
         coords = params.get("coords", COORDINATES[0])
         if coords != "auto":
             return coords, ""
-        return auto_coordinates(model, params.get("loop", "auto"))
+        loop = params.get("loop", "python")
+        return auto_coordinates(model, loop, joint_loop(*_split(spec_name), loop))
 
 
 class _IdaStepper(Stepper):

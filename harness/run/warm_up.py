@@ -43,8 +43,17 @@ PHASES = (
     (("fourbar", "bdf2+baumgarte:loop=compiled", 1e-3, 0.004, "the implicit multistep loop"),
      ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop"),
      ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop"),
+     ("fourbar", "rk4+direct:coords=joint,loop=python", 1e-3, 0.002,
+      "the joint-coordinate path's right-hand side and solves (called from Python)"),
+     # The joint-coordinate loops link the joint right-hand side (and direct's solves) compiled
+     # above by the Python path's case: each of these waits on its lock, then compiles its own
+     # loop (one entry per method family and per treatment with or without the projection).
+     ("fourbar", "rk4+baumgarte:coords=joint", 1e-3, 0.002,
+      "the joint-coordinate loop of the one-step methods"),
+     ("fourbar", "ab5+baumgarte:coords=joint", 1e-3, 0.006,
+      "the joint-coordinate loop of Adams–Bashforth"),
      ("fourbar", "rk4+direct:coords=joint", 1e-3, 0.002,
-      "the joint-coordinate path's right-hand side and solves (called from Python)")),
+      "the joint-coordinate loop of the one-step methods with direct's projection")),
 )
 #: Scenes whose ``default`` and ``best`` generated functions fill idle processes, at a run long
 #: enough for ``loop=auto`` to make them.

@@ -61,8 +61,10 @@ from mbh._harness.model.topology import DisconnectedGraphError
 #: The values of the method option ``coords``: ``auto`` takes the smaller model
 #: (:func:`auto_coordinates`).
 COORDINATES = ("absolute", "joint", "auto")
-#: The loops a joint-coordinate run accepts (it steps in Python; ``auto`` chooses that).
-JOINT_LOOPS = ("auto", "python")
+#: The loops a joint-coordinate run accepts: ``compiled`` (the compiled joint-coordinate loop,
+#: :mod:`~mbh._adapters.inhouse.stepping.joint_loop`, for the methods it runs), ``python`` (the
+#: Python loop, every method), ``auto`` (the compiled loop where it runs the method, else Python).
+JOINT_LOOPS = ("auto", "compiled", "python")
 
 
 def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
@@ -80,14 +82,15 @@ def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
     return None
 
 
-def auto_coordinates(mech: Mechanism, loop: str) -> tuple[str, str]:
+def auto_coordinates(mech: Mechanism, loop: str, joint_loop: str | None) -> tuple[str, str]:
     """``coords=auto``: the coordinates of the smaller model, and the run's note saying which and
     why.
 
     The joint model is taken when its coordinates plus closure equations (n_θ + m_c) are fewer
     than the absolute model's coordinates plus Φ rows (n + m, the Euler-parameter normalisations
     included), the spanning tree has joint coordinates for every tree joint, and the method's
-    ``loop`` lets it step in Python (:data:`JOINT_LOOPS`); otherwise the absolute model.
+    ``loop`` has a joint-coordinate loop for it (``joint_loop``: ``compiled``, ``python``, or
+    None for none); otherwise the absolute model.
 
     Returns
     -------
@@ -106,11 +109,15 @@ def auto_coordinates(mech: Mechanism, loop: str) -> tuple[str, str]:
     sizes = (f"{n_theta} θ and {m_closure} closure equation(s) against {size_absolute}")
     if n_theta + m_closure >= absolute.layout.n + absolute.m:
         return "absolute", f"coords=auto: absolute coordinates, the model no larger ({sizes})"
-    if loop not in JOINT_LOOPS:
+    if joint_loop is None:
         return "absolute", (f"coords=auto: absolute coordinates, as loop={loop} asks: the joint "
-                            f"model is smaller ({sizes}) but steps in Python only")
-    return "joint", (f"coords=auto: joint coordinates, the smaller model ({sizes}); they step in "
-                     "Python, slower per step than the absolute model's compiled loop")
+                            f"model is smaller ({sizes}) but has no such loop for this method")
+    if joint_loop == "python":
+        return "joint", (f"coords=auto: joint coordinates, the smaller model ({sizes}); this "
+                         "method steps them in Python, slower per step than the absolute "
+                         "model's compiled loop")
+    return "joint", (f"coords=auto: joint coordinates, the smaller model ({sizes}), on their "
+                     "compiled loop")
 
 
 class Closure:
@@ -216,7 +223,7 @@ class JointCoordinates(SecondOrderSystem):
                      "solves are rank-revealing (certified Cholesky, else the truncated SVD)")
         if self.closure.m and self.params.get("passage"):
             what += "; no placed passages of singular positions in joint coordinates yet"
-        return what + "; integrated in Python (no compiled loop yet)"
+        return what
 
     # -- the pieces ----------------------------------------------------------------------------
     def closure_jacobian(self, t, theta):
@@ -233,6 +240,13 @@ class JointCoordinates(SecondOrderSystem):
         """The arguments after (θ, θ̇, t) of :func:`~.joint_rhs.reduced_kernel`."""
         return (self.kinematics.table, self.dynamics.kernel_args, self.closure.kernel_args,
                 self.closure.m, (float(self.gains[0]), float(self.gains[1])))
+
+    @property
+    def kernel_args(self) -> tuple:
+        """The arguments after (θ, θ̇, t) of :func:`~.joint_rhs.acceleration_kernel`: the tree
+        pass's table, the dynamics', the closure's, m_c, the gains (α, β) in 1/s and the
+        range-space solve's cut (what :meth:`acceleration` passes)."""
+        return (*self._args, ACCELERATION_CUT)
 
     def reduced(self, t, theta, rate):
         """(M_θ (n_θ, n_θ), Q_θ (n_θ,), C_θ (m_c, n_θ), γ_θ (m_c,)) at (t, θ, θ̇), the

@@ -43,13 +43,33 @@ def test_auto_takes_the_smaller_model_and_says_why(scene, joint, absolute):
     assert sizes(run(scene, "rk4+direct")) == absolute
 
 
-def test_auto_keeps_absolute_coordinates_where_the_method_asks_for_a_compiled_loop():
-    result = run("fourbar", "rk4+direct:coords=auto,loop=compiled")
+@pytest.mark.parametrize("method", ["rk4+direct:coords=auto,loop=generated",
+                                    "bdf2+direct:coords=auto,loop=compiled"])
+def test_auto_keeps_absolute_coordinates_where_the_joint_model_has_no_such_loop(method):
+    """No generated functions in joint coordinates; no compiled joint-coordinate loop for an
+    implicit method."""
+    result = run("fourbar", method)
+    assert result.status == "ok"
+    loop = method.rpartition("loop=")[2]
+    assert result.trajectory.notes[0] == (
+        f"coords=auto: absolute coordinates, as loop={loop} asks: the joint model is smaller "
+        "(3 θ and 2 closure equation(s) against 9 q and 8 Φ rows) but has no such loop for this "
+        "method")
+    assert sizes(result) == (9, 8, 0)
+
+
+@pytest.mark.parametrize("method,loop_note", [
+    ("rk4+direct:coords=auto", ", on their compiled loop"),
+    ("rk4+direct:coords=auto,loop=python", "; this method steps them in Python, slower per step "
+                                           "than the absolute model's compiled loop"),
+    ("bdf2+direct:coords=auto", "; this method steps them in Python, slower per step than the "
+                                "absolute model's compiled loop")])
+def test_auto_says_which_loop_steps_the_joint_model(method, loop_note):
+    result = run("fourbar", method, t_end=0.01)
     assert result.status == "ok"
     assert result.trajectory.notes[0] == (
-        "coords=auto: absolute coordinates, as loop=compiled asks: the joint model is smaller "
-        "(3 θ and 2 closure equation(s) against 9 q and 8 Φ rows) but steps in Python only")
-    assert sizes(result) == (9, 8, 0)
+        "coords=auto: joint coordinates, the smaller model (3 θ and 2 closure equation(s) against "
+        f"9 q and 8 Φ rows){loop_note}")
 
 
 def test_auto_keeps_absolute_coordinates_where_the_tree_needs_a_ball_joint():

@@ -402,7 +402,9 @@ def test_coords_is_listed_and_defaults_to_absolute():
 @pytest.mark.parametrize("method,message", [
     ("rk4+direct:coords=relative", "parameter 'coords' of 'rk4+direct' must be one of absolute, "
                                    "joint, auto, got 'relative'"),
-    ("rk4+direct:coords=joint,loop=compiled", "coords=joint runs on the Python loop only"),
+    ("rk4+direct:coords=joint,loop=generated", "parameter 'loop' of 'rk4+direct': coords=joint "
+                                               "has no loop=generated (there are no generated "
+                                               "functions in joint coordinates)"),
     ("rk4+penalty:coords=joint", "has no parameter coords"),
 ])
 def test_a_bad_coords_value_is_refused_by_name(method, message):
