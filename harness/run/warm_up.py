@@ -14,10 +14,12 @@ cases run in parallel processes, and a phase starts once the previous one has en
 cases load what the previous one compiled (the multistep and partitioned loops call the one-step
 loop's steps).  Within a phase a case may still call what another compiles: the one-step loop
 calls the kernels' right-hand side (about a minute and a half alone), and compiles its other
-callees meanwhile, then waits on that kernel's lock and loads it.  The generated functions of the shipped scenes' ``default``
-and ``best``, and the neutral reference routes of a scene that declares its branch, fill the
-processes that would otherwise wait.  A case that fails is reported, not
-raised: the runs that need its part compile it themselves.
+callees meanwhile, then waits on that kernel's lock and loads it.  The processes the phases
+leave free take, first, the cases that need nothing the phases compile (the DAE solver's kernels
+and the joint-coordinate path: :data:`BESIDE_PHASES`), then the generated functions of the
+shipped scenes' ``default`` and ``best`` and the neutral reference routes of a scene that declares
+its branch.  A case that fails is reported, not raised: the runs that need its part compile it
+themselves.
 """
 
 from __future__ import annotations
@@ -37,23 +39,28 @@ PHASES = (
     # side, then waits on that kernel's lock and loads it (harness/common/kernel_cache.py).
     (("fourbar", "rk4+baumgarte:loop=python", 1e-3, 0.002,
       "the kernels' right-hand side and the start's kernels"),
-     ("fourbar", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "the one-step methods' loop"),
-     ("fourbar", "ida", 1e-3, 0.002, "the DAE solver's kernels")),
+     ("fourbar", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "the one-step methods' loop")),
     # These call the one-step loop's steps (the multistep methods' start, partitioning's stages).
     (("fourbar", "bdf2+baumgarte:loop=compiled", 1e-3, 0.004, "the implicit multistep loop"),
      ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop"),
-     ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop"),
-     ("fourbar", "rk4+direct:coords=joint,loop=python", 1e-3, 0.002,
-      "the joint-coordinate path's right-hand side and solves (called from Python)"),
-     # The joint-coordinate loops link the joint right-hand side (and direct's solves) compiled
-     # above by the Python path's case: each of these waits on its lock, then compiles its own
-     # loop (one entry per method family and per treatment with or without the projection).
-     ("fourbar", "rk4+baumgarte:coords=joint", 1e-3, 0.002,
-      "the joint-coordinate loop of the one-step methods"),
-     ("fourbar", "ab5+baumgarte:coords=joint", 1e-3, 0.006,
-      "the joint-coordinate loop of Adams–Bashforth"),
-     ("fourbar", "rk4+direct:coords=joint", 1e-3, 0.002,
-      "the joint-coordinate loop of the one-step methods with direct's projection")),
+     ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop")),
+)
+#: Cases that call nothing the phases compile but the kernels they share with the right-hand
+#: side (each waits on those kernels' locks and loads them): they take the first process the
+#: phases leave free, before the fill cases, so that they run while the one-step loop compiles
+#: instead of after it.  The joint-coordinate loops link the joint right-hand side (and direct's
+#: solves) that the Python path's case compiles: each waits on its lock, then compiles its own
+#: loop (one entry per method family and per treatment with or without the projection).
+BESIDE_PHASES = (
+    ("fourbar", "ida", 1e-3, 0.002, "the DAE solver's kernels"),
+    ("fourbar", "rk4+direct:coords=joint,loop=python", 1e-3, 0.002,
+     "the joint-coordinate path's right-hand side and solves (called from Python)"),
+    ("fourbar", "ab5+baumgarte:coords=joint", 1e-3, 0.006,
+     "the joint-coordinate loop of Adams–Bashforth"),
+    ("fourbar", "rk4+direct:coords=joint", 1e-3, 0.002,
+     "the joint-coordinate loop of the one-step methods with direct's projection"),
+    ("fourbar", "rk4+baumgarte:coords=joint", 1e-3, 0.002,
+     "the joint-coordinate loop of the one-step methods"),
 )
 #: Scenes whose ``default`` and ``best`` generated functions fill idle processes, at a run long
 #: enough for ``loop=auto`` to make them.
@@ -94,8 +101,10 @@ class Warmed:
 
 
 def _fill_cases() -> list[WarmCase]:
-    """The generated functions of :data:`FILL_SCENES`' default and best (``loop=generated``)."""
-    return [WarmCase(scene, NEUTRAL_ROUTES, 1e-3, 0.002, "the neutral reference kernels")
+    """:data:`BESIDE_PHASES`, then the generated functions of :data:`FILL_SCENES`' default and
+    best (``loop=generated``)."""
+    return [WarmCase(*case) for case in BESIDE_PHASES] + [
+        WarmCase(scene, NEUTRAL_ROUTES, 1e-3, 0.002, "the neutral reference kernels")
             for scene in NEUTRAL_FILL_SCENES] + [
         WarmCase(scene, f"{alias}:loop=generated", 1e-3, 0.002,
                  f"{scene}'s generated functions ({alias})")
@@ -127,8 +136,8 @@ def _run(case: WarmCase) -> Warmed:
 
 
 def warm_up(jobs: int) -> list[Warmed]:
-    """Run :data:`PHASES` on ``jobs`` processes, the fill cases in the processes a phase leaves
-    idle; every case's :class:`Warmed`, in the order they ended."""
+    """Run :data:`PHASES` on ``jobs`` processes, :data:`BESIDE_PHASES` and the fill cases in the
+    processes a phase leaves idle; every case's :class:`Warmed`, in the order they ended."""
     fill = _fill_cases()
     done: list[Warmed] = []
 

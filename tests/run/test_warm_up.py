@@ -1,5 +1,6 @@
 """``mbh warm-up`` (harness/run/warm_up.py): its phases run in parallel processes, idle processes
-take the fill cases, and a case that fails is reported, not raised."""
+take the cases beside the phases and the fill cases, and a case that fails is reported, not
+raised."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ def test_every_case_runs_once_and_a_failure_is_a_row(monkeypatch, capsys):
          ("fourbar", "rk4+nosuch", 1e-3, 0.002, "a method that does not exist")),
         (("simple_pendulum", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "a kernels' loop"),),
     ))
+    monkeypatch.setattr(warm_up, "BESIDE_PHASES", (
+        ("simple_pendulum", "rk4+baumgarte:loop=python", 1e-3, 0.002, "a Python-path case"),))
     monkeypatch.setattr(warm_up, "FILL_SCENES", ("simple_pendulum",))
     monkeypatch.setattr(warm_up, "NEUTRAL_FILL_SCENES", ())
     assert cli.main(["warm-up", "--jobs", "2", "--json", "--quiet"]) == 0
@@ -23,6 +26,7 @@ def test_every_case_runs_once_and_a_failure_is_a_row(monkeypatch, capsys):
         ("fourbar", "rk4+direct:loop=generated"), ("fourbar", "rk4+nosuch"),
         ("simple_pendulum", "rk4+baumgarte:loop=compiled"),
         ("simple_pendulum", "rk4+baumgarte:loop=generated"),
+        ("simple_pendulum", "rk4+baumgarte:loop=python"),
         ("simple_pendulum", "rk4+direct:loop=generated")]
     problems = {row["method"]: row["problem"] for row in rows if row["problem"]}
     assert list(problems) == ["rk4+nosuch"] and "unknown stabilisation" in problems["rk4+nosuch"]
