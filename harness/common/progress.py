@@ -78,7 +78,7 @@ class StageProgress:
 
     def __init__(self, description: str, estimates: list[float], enabled: bool):
         self._estimates = [max(float(e), 0.0) for e in estimates]
-        self._bar = tqdm(total=round(sum(self._estimates), 1), unit="s", desc=description,
+        self._bar = tqdm(total=sum(self._estimates), unit="s", desc=description,
                          file=sys.stderr, disable=not enabled, dynamic_ncols=True,
                          bar_format="{desc}: {percentage:3.0f}%|{bar}| "
                                     "[{elapsed} elapsed, ~{remaining} left]{postfix}")

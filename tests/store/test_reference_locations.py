@@ -67,3 +67,12 @@ def test_the_bar_never_runs_past_a_stage_estimate_nor_ends_short():
     bar.run(1, "second", lambda: None)   # far shorter than its estimate: jumps to the end
     assert bar._done == pytest.approx(5.2)
     bar.close()
+
+
+@pytest.mark.filterwarnings("error")
+def test_the_bar_ends_at_its_total_when_the_estimates_do_not_round():
+    """The total is the estimates' sum itself: rounded to 0.1 s (1.0 for 1.04), the bar ended past
+    it and tqdm warned 'clamping frac to range [0, 1]' in a fresh clone's default suite."""
+    with StageProgress("test", [1.04], enabled=True) as bar:
+        bar.run(0, "only", lambda: None)
+        assert bar._done == pytest.approx(bar._bar.total)
