@@ -102,7 +102,7 @@ def _keep(states, current, k, targets, reached, theta_out, rate_out, counters, c
 
 @njit(cache=True)
 def _closure_jacobian(theta, t, tree, closure, m_c, counters):
-    """C_θ = Φ_cut,q B (m_c, n_θ) at θ, and g(θ) (n,)."""
+    """C_θ = Φ_cut,q B (m_c, n_θ) at θ."""
     counters[JACOBIAN_EVALS] += 1
     q, b, _ = tree_pass(theta, np.zeros(theta.shape[0]), tree)
     jac = kernels.jacobian(q, t, closure)

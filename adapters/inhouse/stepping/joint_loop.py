@@ -185,9 +185,11 @@ class JointLoopStepper(FormulationStepper):
     def _states(self, t: float) -> BodyStates:
         if self.steps == 0:
             return body_states(self.layout, *self._start_state)
-        row = self._row
-        return body_states(self.layout, *self.formulation.expand(
-            self.t_good, self._theta_out[row], self._rate_out[row]))
+        if self._row is None:  # after a failure: the call's last good state, after step done
+            theta, rate = self._end[0], self._end[1]
+        else:
+            theta, rate = self._theta_out[self._row], self._rate_out[self._row]
+        return body_states(self.layout, *self.formulation.expand(self.t_good, theta, rate))
 
     def counters(self) -> dict:
         """The cost up to the state the run is at: the counters kept with the sample read last
