@@ -9,8 +9,9 @@ dt = 1e-2 s (1e-3 s for the four-bars), over the first second, it prints µs per
 wall time, samples read at every step left out as the harness leaves them out, over its steps;
 best of five runs after one that compiles or loads):
 
-* ab5+baumgarte:coords=joint and rk4+baumgarte:coords=joint with ``loop=python`` and with the
-  compiled loop (``loop=compiled``);
+* ab5+baumgarte:coords=joint and rk4+baumgarte:coords=joint with ``loop=python``, with the
+  compiled loop on the kernel (``loop=compiled``) and with the right-hand side generated for the
+  mechanism (``loop=generated``, the default);
 * one joint-coordinate right-hand side called from Python (µs per call, best of five rounds of
   2,000), what a step costs at least: ab5 makes one a step, rk4 four;
 * the absolute model (``ab5+baumgarte``, its default loop) and MuJoCo ``best``.
@@ -36,8 +37,10 @@ STEP = {"fourbar": 1e-3, "fourbar_spatial": 1e-3}
 T_END, REPEATS, CALLS = 1.0, 5, 2000
 COLUMNS = [("inhouse", "ab5+baumgarte:coords=joint,loop=python", "ab5 py"),
            ("inhouse", "ab5+baumgarte:coords=joint,loop=compiled", "ab5 comp"),
+           ("inhouse", "ab5+baumgarte:coords=joint,loop=generated", "ab5 gen"),
            ("inhouse", "rk4+baumgarte:coords=joint,loop=python", "rk4 py"),
            ("inhouse", "rk4+baumgarte:coords=joint,loop=compiled", "rk4 comp"),
+           ("inhouse", "rk4+baumgarte:coords=joint,loop=generated", "rk4 gen"),
            ("inhouse", "ab5+baumgarte", "abs ab5"),
            ("mujoco", "best", "mujoco")]
 

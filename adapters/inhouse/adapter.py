@@ -181,11 +181,10 @@ class InhouseAdapter(Adapter):
                              f"{', '.join(COORDINATES)}, got {coords!r}")
         loop = params.get("loop", "python")
         if coords == "joint" and joint_loop(*_split(spec.name), loop) is None:
-            why = (joint_loop_unsupported(*_split(spec.name)) if loop == "compiled" else
-                   "there are no generated functions in joint coordinates")
             raise ValueError(f"parameter 'loop' of {spec.name!r}: coords=joint has no loop={loop}"
-                             f" ({why}); it takes loop={' or loop='.join(JOINT_LOOPS)} where "
-                             "auto is the compiled loop where it runs the method, else Python")
+                             f" ({joint_loop_unsupported(*_split(spec.name))}); it takes "
+                             f"loop={' or loop='.join(JOINT_LOOPS)} where auto is the compiled "
+                             "loop where it runs the method, else Python")
         if spec.name == "ida":
             from mbh._adapters.inhouse.formulations.dae import check_ida_params
             check_ida_params(params)
@@ -197,7 +196,7 @@ class InhouseAdapter(Adapter):
         spec, params = self.method_spec(method)
         loop = params.get("loop", "python")
         joint = self._coordinates(model, spec.name, params)[0] == "joint"
-        if loop == "python" or (joint and joint_loop(*_split(spec.name), loop) != "compiled"):
+        if loop == "python" or (joint and joint_loop(*_split(spec.name), loop) == "python"):
             raise UnsupportedCase(f"{spec.name} runs on the Python path: no bare loop apart from "
                                   "the adapter's")
         stepper = self._start(model, spec, params, RunGrid(dt, n_steps * dt, np.zeros(1), True))
@@ -222,8 +221,8 @@ class InhouseAdapter(Adapter):
         rest = {k: v for k, v in params.items()
                 if k not in formulation.defaults and k not in ("loop", "coords")}
         loop = params.get("loop", "python")
-        if joint and joint_loop(integrator, strategy, loop) == "compiled":
-            stepper = JointLoopStepper(model, formulation, integrator, rest, own, grid)
+        if joint and joint_loop(integrator, strategy, loop) != "python":
+            stepper = JointLoopStepper(model, formulation, integrator, rest, own, grid, loop)
         elif joint:
             stepper = JointStepper(model, formulation, integrator, rest, own, grid)
         elif loop == "python":

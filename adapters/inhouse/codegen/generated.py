@@ -17,6 +17,11 @@ the kernel.  :func:`functions` makes the set the loop needs (:data:`ACCELERATION
 :data:`MAX_OPERATIONS`, a kernel path through LAPACK (the banded solves of planar systems with
 30 rows or more, the SVD of a system without a certificate at the start) — each with a note.
 
+The joint-coordinate model's right-hand side (:data:`JOINT_ACCELERATION`,
+:func:`joint_function`) is generated the same way from
+:func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel`, traced on the closure
+(:func:`_traced_inputs`), for its compiled loop (:mod:`mbh._adapters.inhouse.stepping.compiled_joint`).
+
 A generated right-hand side is several times faster than the kernel (figures:
 docs/measurements.md, section "In-house step cost").  The cost is the first compilation, seconds
 per function, paid once per formulation and machine: the source goes to an entry of
@@ -41,9 +46,9 @@ import numpy as np
 from numba import cfunc, types
 from numba.core.errors import NumbaExperimentalFeatureWarning
 
-from mbh._adapters.inhouse.bodies import bodykin, kernels
+from mbh._adapters.inhouse.bodies import bodykin, kernels, tree_pass
 from mbh._adapters.inhouse.codegen import generated_store, tracing
-from mbh._adapters.inhouse.formulations import dynamics, mass_and_forces
+from mbh._adapters.inhouse.formulations import dynamics, joint_rhs, mass_and_forces
 from mbh._adapters.inhouse.numerics import banded, linalg
 from mbh._harness.common import waits
 from mbh._harness.common.digest import feed
@@ -101,8 +106,12 @@ class NotTraceable(NotGenerated):
 #: * VELOCITY_CORRECTION — q̇ − Φ_q⁺Φ_q q̇ (n,) and ρ̂ in out[n], the velocity projection (Rouvinen 2003
 #:   eq. 137) and the conditioning indicator of the placed passages
 #:   (:func:`~mbh._adapters.inhouse.numerics.banded.min_norm_correction_and_indicator`);
-#: * INDICATOR — ρ̂ alone, out[0] (:func:`~mbh._adapters.inhouse.numerics.banded.conditioning_indicator`).
-ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR = range(5)
+#: * INDICATOR — ρ̂ alone, out[0] (:func:`~mbh._adapters.inhouse.numerics.banded.conditioning_indicator`);
+#: * JOINT_ACCELERATION — θ̈ (n_θ,) of the joint-coordinate model
+#:   (:func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel`), its inputs θ, θ̇
+#:   in the places of q, q̇ (:func:`joint_function`; the absolute loops' tuple stops before it).
+(ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR,
+ JOINT_ACCELERATION) = range(6)
 #: The part of a generated module that compiles its straight-line function (``{name}``):
 #: numba's ``cfunc`` of :data:`SIGNATURE` that calls ``{name}_operations``, whose operations
 #: :func:`~mbh._adapters.inhouse.codegen.straight_line.straight_line` emits.  Everything before it is
@@ -117,12 +126,14 @@ def {name}(q, v, t, out):
     return {name}_operations(q, v, t, out)
 """
 _NAMES = ("acceleration", "residual_size", "position_correction", "velocity_correction",
-          "indicator")
+          "indicator", "joint_acceleration")
 
 
 def kernel_outputs(which: int, formulation, q, v, t) -> list:
     """What function ``which`` computes, by the kernels: on symbols (q, v object arrays) its
     trace, on numbers the result the generated function must reproduce."""
+    if which == JOINT_ACCELERATION:
+        return list(joint_rhs.acceleration_kernel(q, v, t, *formulation.kernel_args))
     rows = np.ascontiguousarray(formulation.rows)
     constraint_args = formulation.constraints.kernel_args
     sparsity_arrays = formulation.constraints.sparsity.arrays
@@ -154,6 +165,19 @@ def traced_state(q0: np.ndarray, v0: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return q0 + 1e-6 * rng.standard_normal(q0.size), v0 + rng.standard_normal(v0.size)
 
 
+def _traced_inputs(which: int, formulation, q0: np.ndarray,
+                   v0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where function ``which`` is traced: :func:`traced_state`, its coordinates put back onto
+    the closure for :data:`JOINT_ACCELERATION` (``formulation.on_closure``): off it by 1e-6, the
+    range-space matrix of redundant closure rows is not null to round-off in their directions,
+    and the trace would take the truncated SVD, which it cannot follow, where every run's states,
+    on the closure, take the pivoted Cholesky."""
+    q, v = traced_state(q0, v0)
+    if which == JOINT_ACCELERATION:
+        q = formulation.on_closure(q)
+    return q, v
+
+
 def declines_at_start(which: int, source: str, q0: np.ndarray, v0: np.ndarray) -> bool:
     """Whether generated function ``which`` of module ``source`` declines a call at the start's
     coordinates q0 (with the traced velocities, so that no velocity is zero by the start alone),
@@ -181,11 +205,12 @@ def function_source(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> 
     NotGenerated
         When the trace passes :data:`MAX_OPERATIONS` or meets a branch it cannot follow.
     """
-    q, v = traced_state(q0, v0)
+    q, v = _traced_inputs(which, formulation, q0, v0)
     graph = tracing.Graph(limit=MAX_OPERATIONS)
     name = _NAMES[which]
     try:
-        with tracing.tracing([kernels, mass_and_forces, dynamics, linalg, bodykin, banded]):
+        with tracing.tracing([kernels, mass_and_forces, dynamics, linalg, bodykin, banded,
+                              joint_rhs, tree_pass]):
             out = kernel_outputs(which, formulation, graph.inputs("q", q), graph.inputs("v", v),
                            graph.scalar("t", 0.0))
     except tracing.LimitReached:
@@ -212,6 +237,9 @@ def trace_key(which: int, formulation, q0: np.ndarray, v0: np.ndarray) -> str | 
     function is then traced every time)."""
     digest = hashlib.sha256(kernel_fingerprint().encode())
     try:
+        if which == JOINT_ACCELERATION:  # its kernel's arguments: tree, dynamics, closure, …
+            feed(digest, (which, formulation.kernel_args, q0, v0))
+            return digest.hexdigest()
         feed(digest, (which, formulation.rows, formulation.gains,
                       getattr(formulation, "cut", None),  # projected formulations only
                       formulation.constraints.kernel_args,
@@ -306,7 +334,7 @@ def _load(name: str, source: str, compile_new: bool, which: int):
 
 #: The tuple of :func:`functions` with nothing generated: the kernels for every call (the
 #: compiled loop with ``loop=compiled``).
-NOTHING = (NEVER,) * len(_NAMES)
+NOTHING = (NEVER,) * JOINT_ACCELERATION
 
 
 def functions(formulation, q0: np.ndarray, v0: np.ndarray, wanted,
@@ -315,7 +343,7 @@ def functions(formulation, q0: np.ndarray, v0: np.ndarray, wanted,
     :data:`ACCELERATION` …, the compiled function for each index in ``wanted`` that can be made
     (with ``compile_new`` False: that was compiled before, by any run on this machine) and
     :data:`NEVER` elsewhere, and one note per reason some were not, starting "not generated"."""
-    made, missing = [NEVER] * len(_NAMES), {}
+    made, missing = list(NOTHING), {}
     for which in wanted:
         try:
             made[which] = compiled_function(which, formulation, q0, v0, compile_new)
@@ -324,3 +352,18 @@ def functions(formulation, q0: np.ndarray, v0: np.ndarray, wanted,
     notes = [f"not generated: {', '.join(names)} ({reason}); the generic kernels serve them"
              for reason, names in missing.items()]
     return tuple(made), notes
+
+
+def joint_function(formulation, theta0: np.ndarray, rate0: np.ndarray,
+                   compile_new: bool = True) -> tuple:
+    """The generated :data:`JOINT_ACCELERATION` of a joint-coordinate ``formulation``
+    (:class:`~mbh._adapters.inhouse.formulations.joint_coordinates.JointCoordinates`) started at
+    (θ₀, θ̇₀), and the run's notes: (function, notes), with :data:`NEVER` and a note starting
+    "not generated" where it cannot be made (as :func:`functions`)."""
+    made, missing = NEVER, []
+    try:
+        made = compiled_function(JOINT_ACCELERATION, formulation, theta0, rate0, compile_new)
+    except NotGenerated as error:
+        missing.append(f"not generated: joint acceleration ({error}); the joint-coordinate "
+                       "kernel serves it")
+    return made, missing

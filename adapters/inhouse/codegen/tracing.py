@@ -277,6 +277,12 @@ def _skippable(x) -> bool:
     return not isinstance(x, Symbol) and x == 0.0
 
 
+def _larger(a, b):
+    """:func:`~mbh._adapters.inhouse.numerics.linalg.larger` while tracing: one max node, no
+    guard (:func:`maximum`)."""
+    return maximum([a, b])
+
+
 #: Foreign functions a kernel may call: ctypes pointers and numba's declarations of them
 #: (``types.ExternalFunction``, as :mod:`mbh._adapters.inhouse.numerics.banded` declares LAPACK's dpbtrf).
 _FOREIGN = (ctypes._CFuncPtr, numba_types.ExternalFunction)
@@ -294,7 +300,7 @@ def _untraceable(name: str):
 
 
 #: Compiled functions that tracing replaces by a version of its own rather than their source.
-_TRACED_VERSIONS = {"skippable": _skippable}
+_TRACED_VERSIONS = {"skippable": _skippable, "larger": _larger}
 
 
 @contextlib.contextmanager

@@ -22,7 +22,8 @@ from mbh._adapters.inhouse.numerics.banded import (BANDED_MIN_ROWS, banded_spd_s
                                                    pattern_matvec, pattern_rmatvec)
 from mbh._adapters.inhouse.numerics.linalg import (_cholesky, back_substitution, certified_solve,
                                                    column_gram, forward_substitution, matvec,
-                                                   rmatvec, truncated_solve, weighted_gram)
+                                                   pivot_order, rmatvec, semidefinite_solve,
+                                                   truncated_solve, weighted_gram)
 
 
 @njit(cache=True)
@@ -88,11 +89,11 @@ def range_space_acceleration(mass, jacobian, force, gamma, cut):
                                                              force, gamma, cut)
         if certified:
             return acceleration
-    return augmented_mass_acceleration(mass, jacobian, force, gamma, cut)
+    return augmented_mass_acceleration(mass, jacobian, force, gamma, cut, np.empty(0, np.int64))
 
 
 @njit(cache=True)
-def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
+def augmented_mass_acceleration(mass, jacobian, force, gamma, cut, pivots):
     """q̈ of :func:`range_space_acceleration` by its M̃ form, with the truncated SVD where the
     range-space matrix has no certificate, shape (n,).
 
@@ -101,7 +102,23 @@ def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
     call, so the generated functions can trace it (slender spatial bodies, whose mass blocks
     :func:`spatial_block_acceleration` refuses, come here).  Where M̃ has a pivot that is not
     positive (a body free to spin about an axis of zero moment) LU solves it as before.
+    ``pivots``: the start's pivot order of WᵀW where its rows are redundant
+    (:func:`range_space_pivots`), else empty (:func:`_multipliers`).
     """
+    positive, lower, weighted, reduced = _range_space_matrix(mass, jacobian)
+    if not positive:
+        return _lu_mass_acceleration(mass + _augmentation(mass, jacobian), jacobian, force,
+                                     gamma, cut, pivots)
+    free = forward_substitution(lower, force)
+    if jacobian.shape[0] == 0:
+        return back_substitution(lower, free)
+    mu = _multipliers(reduced, gamma - matvec(weighted, free), cut, pivots)
+    return back_substitution(lower, free + rmatvec(weighted, mu))
+
+
+@njit(cache=True, inline="always")
+def _augmentation(mass, jacobian):
+    """ρ Φ_qᵀΦ_q (n, n) with ρ = tr M / ‖Φ_q‖²_F (0 without rows): M̃ = M + ρ Φ_qᵀΦ_q."""
     n, m = mass.shape[0], jacobian.shape[0]
     scale = 0.0
     for i in range(m):
@@ -111,32 +128,55 @@ def augmented_mass_acceleration(mass, jacobian, force, gamma, cut):
     for c in range(n):
         trace += mass[c, c]
     rho = trace / scale if scale > 0.0 else 0.0
-    augmented = mass + rho * column_gram(jacobian)
-    positive, lower = _cholesky(augmented)
+    return rho * column_gram(jacobian)
+
+
+@njit(cache=True, inline="always")
+def _range_space_matrix(mass, jacobian):
+    """The M̃ form's factor and range-space matrix (:func:`augmented_mass_acceleration`):
+    (positive, L (n, n) with M̃ = LLᵀ, W (m, n) with row i L⁻¹Φ_q[i]ᵀ, WWᵀ (m, m));
+    ``positive`` False (W and WWᵀ empty) where M̃ has a pivot that is not positive."""
+    n, m = mass.shape[0], jacobian.shape[0]
+    positive, lower = _cholesky(mass + _augmentation(mass, jacobian))
+    weighted = np.empty((m if positive else 0, n))
+    reduced = np.zeros((m if positive else 0, m if positive else 0))
     if not positive:
-        return _lu_mass_acceleration(augmented, jacobian, force, gamma, cut)
-    free = forward_substitution(lower, force)
-    if m == 0:
-        return back_substitution(lower, free)
-    weighted = np.empty((m, n))
+        return positive, lower, weighted, reduced
     for i in range(m):
         weighted[i] = forward_substitution(lower, jacobian[i])
-    reduced = np.zeros((m, m))
     for i in range(m):
         for j in range(i + 1):
             total = 0.0
             for c in range(n):
                 total += weighted[i, c] * weighted[j, c]
             reduced[i, j] = reduced[j, i] = total
-    mu = _multipliers(reduced, gamma - matvec(weighted, free), cut)
-    return back_substitution(lower, free + rmatvec(weighted, mu))
+    return positive, lower, weighted, reduced
 
 
 @njit(cache=True)
-def _multipliers(reduced, residual, cut):
-    """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): Cholesky (plain or
-    pivoted, :func:`~mbh._adapters.inhouse.numerics.linalg.certified_solve`) where certified, else the
+def range_space_pivots(mass, jacobian, cut):
+    """The pivot order (rank,) int64 of the range-space matrix Φ_q M̃⁻¹ Φ_qᵀ of
+    :func:`augmented_mass_acceleration` where its rows are redundant and the pivoted solve
+    certifies it (:func:`~mbh._adapters.inhouse.numerics.linalg.pivot_order`); empty otherwise.
+    Computed once at the start and passed to every later solve, it keeps the solve's path the
+    same along a run (the generated functions' guards then hold)."""
+    positive, _, _, reduced = _range_space_matrix(mass, jacobian)
+    if not positive or jacobian.shape[0] == 0:
+        return np.empty(0, np.int64)
+    return pivot_order(reduced, cut)
+
+
+@njit(cache=True)
+def _multipliers(reduced, residual, cut, pivots):
+    """μ of the range-space system ``reduced`` (m, m) μ = ``residual`` (m,): with the start's
+    ``pivots`` (redundant rows, :func:`range_space_pivots`) the pivoted Cholesky in that order
+    where certified; else Cholesky (plain or pivoted,
+    :func:`~mbh._adapters.inhouse.numerics.linalg.certified_solve`) where certified, else the
     truncated SVD at ``cut``, shape (m,)."""
+    if pivots.shape[0] > 0:
+        certified, mu = semidefinite_solve(reduced, residual, cut, pivots)
+        if certified:
+            return mu
     certified, mu = certified_solve(reduced, residual, cut)
     if not certified:
         mu = truncated_solve(reduced, residual, cut)
@@ -144,7 +184,7 @@ def _multipliers(reduced, residual, cut):
 
 
 @njit(cache=True)
-def _lu_mass_acceleration(augmented, jacobian, force, gamma, cut):
+def _lu_mass_acceleration(augmented, jacobian, force, gamma, cut, pivots):
     """q̈ of :func:`augmented_mass_acceleration` for an M̃ (``augmented``, (n, n)) that is not
     positive definite: LU (LAPACK gesv) solves M̃ [free, columns] = [Q, Φ_qᵀ], shape (n,)."""
     n, m = augmented.shape[0], jacobian.shape[0]
@@ -155,7 +195,8 @@ def _lu_mass_acceleration(augmented, jacobian, force, gamma, cut):
     free, columns = solved[:, 0], np.ascontiguousarray(solved[:, 1:])
     if m == 0:
         return free
-    return free + columns @ _multipliers(jacobian @ columns, gamma - jacobian @ free, cut)
+    return free + columns @ _multipliers(jacobian @ columns, gamma - jacobian @ free, cut,
+                                         pivots)
 
 
 @njit(cache=True)
@@ -234,7 +275,7 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
     if nc != PLANAR_NC or jac.shape[0] == 0:  # range_space_acceleration's M̃ branch: an Euler-
         # parameter M is singular, never positive diagonal (a test there would guard on zeros)
         return augmented_mass_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force,
-                                           target, ACCELERATION_CUT)
+                                           target, ACCELERATION_CUT, np.empty(0, np.int64))
     diagonal = planar_mass_diagonal(masses, inertias)  # range_space_acceleration's diagonal
     if np.all(diagonal > 0.0):                          # branch without assembling M
         accepted, acceleration = diagonal_mass_acceleration(1.0 / diagonal, jac, force, target,
@@ -242,7 +283,7 @@ def index1_acceleration(q, v, t, alpha, beta, rows, constraint_args, dynamics_ar
         if accepted:
             return acceleration
     return augmented_mass_acceleration(_mass_matrix(q, nc, masses, inertias), jac, force, target,
-                                       ACCELERATION_CUT)
+                                       ACCELERATION_CUT, np.empty(0, np.int64))
 
 
 @njit(cache=True)

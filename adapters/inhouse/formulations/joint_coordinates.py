@@ -20,9 +20,12 @@ joints are the absolute equations of those joints alone, Φ_θ(θ) = Φ_cut(g(θ
 (Φ_cut,q, γ_cut from :class:`~mbh._adapters.inhouse.bodies.constraints.ConstraintSystem`).  All of
 it, from θ to θ̈, is one compiled call (:mod:`.joint_rhs`).  The
 pair [M_θ C_θᵀ; C_θ 0] is solved by the absolute formulation's range-space solve
-(:func:`~mbh._adapters.inhouse.formulations.dynamics.range_space_acceleration`): certified
+(:func:`~mbh._adapters.inhouse.formulations.dynamics.augmented_mass_acceleration`): certified
 Cholesky, else the truncated SVD, so redundant closure rows (Bricard, parallel revolutes) are
-solved rank-revealingly, never dropped by guess.
+solved rank-revealingly, never dropped by guess.  Where rows are redundant, the pivoted Cholesky
+takes them in the order it chose at the start (:attr:`JointCoordinates.pivots`) for as long as
+its certificate holds, so that the solve's path, and a generated right-hand side's guards
+(:mod:`~mbh._adapters.inhouse.codegen.generated`), do not change with the order of its diagonal.
 
 Treatments (the absolute strategies' names and parameters; ``passage`` has no effect here: no
 placed passages of singular positions in joint coordinates yet):
@@ -46,7 +49,7 @@ import numpy as np
 from mbh._adapters.inhouse.bodies.constraints import ConstraintSystem
 from mbh._adapters.inhouse.bodies.tree_kinematics import TreeKinematics
 from mbh._adapters.inhouse.bodies.tree_moves import tree_moves, tree_of, unsupported_tree_joints
-from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT
+from mbh._adapters.inhouse.formulations.dynamics import ACCELERATION_CUT, range_space_pivots
 from mbh._adapters.inhouse.formulations.joint_rhs import acceleration_kernel, reduced_kernel
 from mbh._adapters.inhouse.formulations.mass_and_forces import Dynamics
 from mbh._adapters.inhouse.formulations.stabilisation import (Baumgarte, DirectCorrection,
@@ -61,10 +64,13 @@ from mbh._harness.model.topology import DisconnectedGraphError
 #: The values of the method option ``coords``: ``auto`` takes the smaller model
 #: (:func:`auto_coordinates`).
 COORDINATES = ("absolute", "joint", "auto")
-#: The loops a joint-coordinate run accepts: ``compiled`` (the compiled joint-coordinate loop,
-#: :mod:`~mbh._adapters.inhouse.stepping.joint_loop`, for the methods it runs), ``python`` (the
-#: Python loop, every method), ``auto`` (the compiled loop where it runs the method, else Python).
-JOINT_LOOPS = ("auto", "compiled", "python")
+#: The loops a joint-coordinate run accepts: ``generated`` (the compiled joint-coordinate loop,
+#: :mod:`~mbh._adapters.inhouse.stepping.joint_loop`, for the methods it runs, with the right-hand
+#: side generated for the mechanism, :func:`~mbh._adapters.inhouse.codegen.generated.joint_function`),
+#: ``compiled`` (that loop on the kernel alone), ``python`` (the Python loop, every method),
+#: ``auto`` (``generated`` where the loop runs the method, except that a short run compiles no
+#: new generated function, as the absolute model's ``auto``; else Python).
+JOINT_LOOPS = ("auto", "generated", "compiled", "python")
 
 
 def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
@@ -198,6 +204,9 @@ class JointCoordinates(SecondOrderSystem):
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
         self._args = self._kernel_args()
         self.rank, self.redundant = self._rank_at(self.kinematics.theta0)
+        #: The start's pivot order of the range-space solve where closure rows are redundant
+        #: (:func:`~.dynamics.range_space_pivots`), (rank,) int64; empty otherwise.
+        self.pivots = self._start_pivots()
         self.notes = [self._model_note(tree)]
 
     def _rank_at(self, theta) -> tuple[int, tuple[str, ...]]:
@@ -210,6 +219,16 @@ class JointCoordinates(SecondOrderSystem):
         left = sorted(set(range(self.closure.m)) - set(np.asarray(rows[:rank]).tolist()))
         return int(rank), tuple(self.closure.labels[i] for i in left)
 
+    def _start_pivots(self) -> np.ndarray:
+        """The range-space solve's pivot order at θ₀ where closure rows are redundant: every
+        later solve takes its rows in that order while its certificate holds, so its path (and a
+        generated right-hand side's guards) stays the same along the run."""
+        if not self.redundant:
+            return np.empty(0, np.int64)
+        theta = self.kinematics.theta0
+        mass, _, c, _ = self.reduced(0.0, theta, np.zeros(theta.size))
+        return range_space_pivots(mass, np.ascontiguousarray(c), ACCELERATION_CUT)
+
     def _model_note(self, tree) -> str:
         """The run's note on its model: coordinates, closure equations, redundant ones."""
         what = (f"joint coordinates: {self.n} θ ({', '.join(self.kinematics.moves.coordinate_labels)}"
@@ -220,7 +239,8 @@ class JointCoordinates(SecondOrderSystem):
             what += ", 0 redundant"
         else:
             what += (f", {len(self.redundant)} redundant ({', '.join(self.redundant)}): kept, the "
-                     "solves are rank-revealing (certified Cholesky, else the truncated SVD)")
+                     "solves are rank-revealing (certified Cholesky, pivoted in the start's "
+                     "order, else the truncated SVD)")
         if self.closure.m and self.params.get("passage"):
             what += "; no placed passages of singular positions in joint coordinates yet"
         return what
@@ -236,6 +256,23 @@ class JointCoordinates(SecondOrderSystem):
         """Φ_θ = Φ_cut(g(θ)), shape (m_c,)."""
         return self.closure.phi(self.kinematics.positions(theta), t)
 
+    def on_closure(self, theta: np.ndarray) -> np.ndarray:
+        """θ (n_θ,) moved onto Φ_θ = 0 (at t = 0) by Newton with C_θ's pseudo-inverse truncated
+        at the rank tolerance (Rouvinen 2003, eq. 127 in θ), to round-off; the counters left as
+        they were.  Where a generated right-hand side is traced
+        (:mod:`~mbh._adapters.inhouse.codegen.generated`)."""
+        if not self.closure.m:
+            return theta
+        jacobian_evals = self.counters["jacobian_evals"]
+        moved = newton_onto(
+            lambda x: self.closure_residual(0.0, x),
+            lambda x, residual: truncated_solve(
+                np.ascontiguousarray(self.closure_jacobian(0.0, x)),
+                np.ascontiguousarray(residual), RANK_TOLERANCE),
+            theta, {"proj_tol": 1e-15, "proj_max_iter": 20}, {"newton_iterations": 0})
+        self.counters["jacobian_evals"] = jacobian_evals
+        return moved
+
     def _kernel_args(self) -> tuple:
         """The arguments after (θ, θ̇, t) of :func:`~.joint_rhs.reduced_kernel`."""
         return (self.kinematics.table, self.dynamics.kernel_args, self.closure.kernel_args,
@@ -245,8 +282,8 @@ class JointCoordinates(SecondOrderSystem):
     def kernel_args(self) -> tuple:
         """The arguments after (θ, θ̇, t) of :func:`~.joint_rhs.acceleration_kernel`: the tree
         pass's table, the dynamics', the closure's, m_c, the gains (α, β) in 1/s and the
-        range-space solve's cut (what :meth:`acceleration` passes)."""
-        return (*self._args, ACCELERATION_CUT)
+        range-space solve's cut and the start's pivots (what :meth:`acceleration` passes)."""
+        return (*self._args, ACCELERATION_CUT, self.pivots)
 
     def reduced(self, t, theta, rate):
         """(M_θ (n_θ, n_θ), Q_θ (n_θ,), C_θ (m_c, n_θ), γ_θ (m_c,)) at (t, θ, θ̇), the
@@ -261,7 +298,7 @@ class JointCoordinates(SecondOrderSystem):
         self.counters["jacobian_evals"] += 1
         self.counters["factorizations"] += 1
         return acceleration_kernel(np.asarray(q, dtype=float), np.asarray(v, dtype=float),
-                                   float(t), *self._args, ACCELERATION_CUT)
+                                   float(t), *self.kernel_args)
 
     # -- the stepper's protocol (as :class:`~.stabilisation.Formulation`) -----------------------
     def start(self, q, v):

@@ -6,7 +6,7 @@ and, for Baumgarte's terms, eq. 110).
 Each piece is a call of its own compiled kernel (:func:`~..bodies.tree_pass.tree_pass`,
 :func:`~.mass_and_forces.mass_and_forces_kernel`, :func:`~..bodies.kernels.jacobian`,
 :func:`~..bodies.kernels.gamma`, :func:`~..bodies.kernels.phi`,
-:func:`~.dynamics.range_space_acceleration`), none inlined here: the constraint kernels are
+:func:`~.dynamics.augmented_mass_acceleration`), none inlined here: the constraint kernels are
 marked :func:`~..numerics.inlining.called_from_python` and this module's entries are too, so
 numba compiles their helpers once, not again inside these functions
 (:mod:`~..numerics.inlining`).  The products with B are plain loops in the order of the dense
@@ -28,7 +28,7 @@ from numba import njit
 
 from mbh._adapters.inhouse.bodies import kernels
 from mbh._adapters.inhouse.bodies.tree_pass import tree_pass
-from mbh._adapters.inhouse.formulations.dynamics import range_space_acceleration
+from mbh._adapters.inhouse.formulations.dynamics import augmented_mass_acceleration
 from mbh._adapters.inhouse.formulations.mass_and_forces import mass_and_forces_kernel
 from mbh._adapters.inhouse.numerics.inlining import called_from_python
 
@@ -91,8 +91,12 @@ def reduced_kernel(theta, rate, t, tree, dynamics, closure, m_c, gains):
 
 @called_from_python
 @njit(cache=True)
-def acceleration_kernel(theta, rate, t, tree, dynamics, closure, m_c, gains, cut):
+def acceleration_kernel(theta, rate, t, tree, dynamics, closure, m_c, gains, cut, pivots):
     """θ̈ (n_θ,) of [M_θ C_θᵀ; C_θ 0] (:func:`reduced_kernel`) by the range-space solve at the
-    relative singular-value ``cut``, in rad/s² or m/s² per coordinate."""
+    relative singular-value ``cut`` in its M̃ form
+    (:func:`~.dynamics.augmented_mass_acceleration`: M_θ of a tree is dense, so the diagonal
+    branch of :func:`~.dynamics.range_space_acceleration` would only test its zeros), with the
+    start's ``pivots`` of redundant closure rows (:func:`~.dynamics.range_space_pivots`; empty:
+    none), in rad/s² or m/s² per coordinate."""
     mass, force, c, gamma = reduced_kernel(theta, rate, t, tree, dynamics, closure, m_c, gains)
-    return range_space_acceleration(mass, c, force, gamma, cut)
+    return augmented_mass_acceleration(mass, c, force, gamma, cut, pivots)

@@ -47,6 +47,14 @@ def skippable(x):
     return x == 0.0
 
 
+@njit(cache=True, inline="always")
+def larger(a, b):
+    """max(a, b) of two floats.  (Traced code, :mod:`mbh._adapters.inhouse.codegen.tracing`,
+    records it as one max node without a guard: which of the two is larger may change from call
+    to call without changing the path.)"""
+    return a if a > b else b
+
+
 #: A Cholesky solve is used only when the condition-number bound of :func:`certified_spd_solve`
 #: is this factor inside the truncation threshold, so that the bound's own round-off cannot
 #: let through a matrix the truncated SVD would have cut.  The bound is rigorous in exact
@@ -235,12 +243,17 @@ NULL_LEVEL = 1e-9
 
 
 @njit(cache=True)
-def _pivoted_cholesky(matrix, cut):
+def _pivoted_cholesky(matrix, cut, pivots):
     """Cholesky factorisation of a symmetric positive semi-definite matrix (k, k) with diagonal
     pivoting (LAPACK pstrf's choice: the largest remaining diagonal of the Schur complement
     next), left-looking, stopped when no remaining diagonal exceeds ``cut`` × the largest
-    diagonal of the matrix.  Rows are never moved: ``factor[i, j]`` is entry j of row i of the
-    factor, for the rows taken (the first ``rank`` of ``order``) and the rows left.
+    diagonal of the matrix.  Given ``pivots`` (r,) int64, r ≥ 1, the rows are taken in that
+    order instead (the order an earlier factorisation chose, :func:`pivot_order`), and r of them
+    at most: no comparison of one diagonal with another, so the path, and with it a generated
+    function's guards (:mod:`~mbh._adapters.inhouse.codegen.tracing`), does not change where two
+    of them swap their order along a run.  ``pivots`` empty: the largest remaining each time.
+    Rows are never moved: ``factor[i, j]`` is entry j of row i of the factor, for the rows taken
+    (the first ``rank`` of ``order``) and the rows left.
 
     Returns
     -------
@@ -258,16 +271,19 @@ def _pivoted_cholesky(matrix, cut):
     largest = 0.0
     for i in range(k):
         remaining[i] = matrix[i, i]
-        if remaining[i] > largest:
-            largest = remaining[i]
+        largest = larger(largest, remaining[i])
     taken = np.zeros(k, np.bool_)
     order = np.empty(k, np.int64)
     rank = 0
-    for j in range(k):
-        p = -1
-        for i in range(k):
-            if not taken[i] and (p < 0 or remaining[i] > remaining[p]):
-                p = i
+    given = pivots.shape[0]
+    for j in range(k if given == 0 else min(given, k)):
+        if given:
+            p = pivots[j]
+        else:
+            p = -1
+            for i in range(k):
+                if not taken[i] and (p < 0 or remaining[i] > remaining[p]):
+                    p = i
         if not remaining[p] > cut * largest:
             break
         taken[p] = True
@@ -340,7 +356,7 @@ def _remove_component(vector, unit):
 
 
 @njit(cache=True)
-def semidefinite_solve(matrix, rhs, cut):
+def semidefinite_solve(matrix, rhs, cut, pivots):
     """:func:`truncated_solve` at ``cut`` of a symmetric positive semi-definite matrix (k, k)
     whose spectrum splits cleanly: some eigenvalues certified above the cut and the others
     certified below it (redundant constraint rows: S = Φ_q W Φ_qᵀ is singular wherever Φ_q's
@@ -362,6 +378,10 @@ def semidefinite_solve(matrix, rhs, cut):
       below cut · λ_max(S) (λ_max ≥ ‖S‖_F/√k), which the truncated SVD drops; and null to
       round-off (:data:`NULL_LEVEL`), not merely small.
 
+    ``pivots`` (r,) int64: the rows to take, in order (:func:`pivot_order` at an earlier state,
+    as the joint-coordinate model passes its start's); empty: the factorisation chooses them.
+    Either way the certificate decides whether the result stands.
+
     Returns
     -------
     certified : bool
@@ -369,7 +389,7 @@ def semidefinite_solve(matrix, rhs, cut):
     x : ndarray, shape (k,) or (0,)
     """
     k = rhs.shape[0]
-    rank, order, factor = _pivoted_cholesky(matrix, cut)
+    rank, order, factor = _pivoted_cholesky(matrix, cut, pivots)
     if rank == 0 or rank == k:
         return False, np.empty(0)
     lower = np.empty((rank, rank))
@@ -399,6 +419,19 @@ def semidefinite_solve(matrix, rhs, cut):
 
 
 @njit(cache=True)
+def pivot_order(matrix, cut):
+    """The rows the pivoted factorisation of :func:`semidefinite_solve` takes in a symmetric
+    positive semi-definite matrix (k, k) with redundant rows, in the order taken, shape
+    (rank,) int64, when it certifies the matrix that way; empty otherwise (every row taken, or
+    no certificate).  Passed back to :func:`semidefinite_solve` at later states, it fixes the
+    order where the certificate still holds."""
+    rank, order, _ = _pivoted_cholesky(matrix, cut, np.empty(0, np.int64))
+    pivots = order[:rank].copy()
+    certified, _ = semidefinite_solve(matrix, np.zeros(matrix.shape[0]), cut, pivots)
+    return pivots if certified else np.empty(0, np.int64)
+
+
+@njit(cache=True)
 def certified_solve(matrix, rhs, cut):
     """:func:`certified_spd_solve`, else :func:`semidefinite_solve`: the solution of
     :func:`truncated_solve` at ``cut`` for a symmetric positive (semi-)definite matrix (k, k)
@@ -412,7 +445,7 @@ def certified_solve(matrix, rhs, cut):
     certified, x = certified_spd_solve(matrix, rhs, cut)
     if certified:
         return True, x
-    return semidefinite_solve(matrix, rhs, cut)
+    return semidefinite_solve(matrix, rhs, cut, np.empty(0, np.int64))
 
 
 @njit(cache=True)
@@ -537,7 +570,7 @@ def min_norm_solve_and_bound(matrix, rhs, cut):
     positive, lower, bound = _certified_factor(gram)
     if positive and bound * BOUND_MARGIN * (cut * cut) < 1.0:
         return rmatvec(matrix, _cholesky_solve(lower, rhs)), positive, bound
-    certified, y = semidefinite_solve(gram, rhs, cut * cut)
+    certified, y = semidefinite_solve(gram, rhs, cut * cut, np.empty(0, np.int64))
     if certified:
         return rmatvec(matrix, y), positive, bound
     return truncated_solve(matrix, rhs, cut), positive, bound

@@ -1,8 +1,13 @@
 """The compiled stepping loops of the joint-coordinate model (``coords=joint``): a whole run of
-(θ, θ̇) (n_θ,) in one numba call, each right-hand side one call of
+(θ, θ̇) (n_θ,) in one numba call, each right-hand side one call of the function generated for
+the mechanism or of
 :func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel`, as
 :mod:`~mbh._adapters.inhouse.stepping.compiled` and :mod:`.compiled_multistep` run the absolute
 model.
+
+Each right-hand side is first asked of the function generated for the mechanism (where it
+declines a call, a guard of its trace failing, the kernel computes it, counted as
+``kernel_calls``): the kernel's result to the bit either way.
 
 The steps are the Python path's (:class:`~mbh._adapters.inhouse.stepping.joint_stepper.JointStepper`
 over :mod:`mbh._adapters.integrators`) in the same operation order, so the two agree to the bit
@@ -28,12 +33,14 @@ of ``theta_out``, ``rate_out`` (k, n_θ), and the counters after them to the row
 ``counters_out`` (k, :data:`~.loop_codes.COUNTERS`) int64 (a run the harness stops at a sample
 reports the cost up to there, as the Python loop, which has stepped no further); ``model`` the arguments after (θ, θ̇, t) of
 :func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel` (its ``tree``,
-``dynamics``, ``closure``, ``m_c``, ``gains``, ``cut``);
+``dynamics``, ``closure``, ``m_c``, ``gains``, ``cut``, ``pivots``) and the generated right-hand
+side (:func:`~mbh._adapters.inhouse.codegen.generated.joint_function`, or
+:data:`~mbh._adapters.inhouse.codegen.generated.NEVER`: the kernel for every call);
 ``projection`` None (``none``, ``baumgarte``: its code is then not compiled) or (proj_tol,
 proj_max_iter, the pseudo-inverse's relative cut) of ``direct``; ``limit`` the divergence limit
 on the 2-norms of θ and θ̇; ``counters`` (:data:`~.loop_codes.COUNTERS`,) int64, incremented in
 place as the Python path counts (each right-hand side one evaluation, one C_θ, one
-factorisation).  Each returns (θ, θ̇) after step ``done`` (new arrays), ``done``, the status
+factorisation), and the calls the generated function handed to the kernel.  Each returns (θ, θ̇) after step ``done`` (new arrays), ``done``, the status
 (:data:`~.loop_codes.RUNNING` when every target was reached, the divergence code of step
 ``done + 1``, or :data:`~.loop_codes.FAILED_LINALG` when it raised: the caller words that) and
 the number of targets reached.
@@ -53,15 +60,22 @@ from mbh._adapters.inhouse.stepping.compiled_multistep import _explicit_part
 from mbh._adapters.inhouse.stepping.kernel_step import (combine_stages, count_evaluation,
                                                         hold_state)
 from mbh._adapters.inhouse.stepping.loop_codes import (FACTORIZATIONS, FAILED_LINALG,
-                                                       JACOBIAN_EVALS, NEWTON_ITERATIONS, RUNNING)
+                                                       JACOBIAN_EVALS, KERNEL_CALLS,
+                                                       NEWTON_ITERATIONS, RUNNING)
 
 
 @njit(cache=True, inline="always")
-def _acceleration(theta, rate, t, model):
-    """θ̈ (n_θ,) at (θ, θ̇, t): :func:`acceleration_kernel` on ``model``, entry by entry (a
-    star-unpacked call after positional ones is bytecode numba does not take)."""
+def _acceleration(theta, rate, t, model, counters):
+    """θ̈ (n_θ,) at (θ, θ̇, t): the generated function ``model[7]`` where it accepts the call,
+    else :func:`acceleration_kernel` on ``model``'s first seven entries, counted in
+    ``counters[KERNEL_CALLS]`` (entry by entry: a star-unpacked call after positional ones is
+    bytecode numba does not take)."""
+    out = np.empty(theta.shape[0])
+    if model[7](theta, rate, t, out) == 1:
+        return out
+    counters[KERNEL_CALLS] += 1
     return acceleration_kernel(theta, rate, t, model[0], model[1], model[2], model[3], model[4],
-                               model[5])
+                               model[5], model[6])
 
 
 @njit(cache=True)
@@ -81,7 +95,7 @@ def _nystrom_into(states, current, new, stage, stages, t, h, tableau, model, cou
         combine_stages(stage, 0, states, current, stages, c[i] * h, h * h, position_table, h,
                        velocity_table, i)
         count_evaluation(counters)
-        a = _acceleration(stage[0, 0], stage[0, 1], t + c[i] * h, model)
+        a = _acceleration(stage[0, 0], stage[0, 1], t + c[i] * h, model, counters)
         for e in range(a.shape[0]):
             stages[i, e] = a[e]
     combine_stages(states, new, states, current, stages, h, h * h, position_table, h,
@@ -207,7 +221,7 @@ def run_adams_bashforth_samples(theta, rate, t0, dt, first, targets, method, mod
         new = 1 - current
         try:
             count_evaluation(counters)
-            a = _acceleration(states[current, 0], states[current, 1], t, model)
+            a = _acceleration(states[current, 0], states[current, 1], t, model, counters)
             for j in range(points - 1, 0, -1):
                 for e in range(2 * n):
                     history[j, 0, e] = history[j - 1, 0, e]

@@ -3,7 +3,10 @@
 sample time in one compiled call, no Python per step, for the explicit one-step methods and
 Adams–Bashforth ab1–ab5 with ``none``, ``baumgarte`` and ``direct`` (:func:`joint_loop_unsupported`
 says why another method does not run there; it runs on the Python loop,
-:class:`~mbh._adapters.inhouse.stepping.joint_stepper.JointStepper`).
+:class:`~mbh._adapters.inhouse.stepping.joint_stepper.JointStepper`).  With ``loop=generated``
+or ``auto`` the right-hand side is the function generated for the mechanism
+(:func:`~mbh._adapters.inhouse.codegen.generated.joint_function`) wherever it accepts a call;
+``direct``'s projection stays on the kernels.
 
 The formulation object is built as on the Python loop (θ₀, the gains of ``auto``, the
 projection's cut, the notes), so both loops integrate the same equations with the same
@@ -26,8 +29,10 @@ import numpy as np
 
 from mbh._adapters.base import RunFailure, RunGrid
 from mbh._adapters.inhouse.bodies.states import body_states
+from mbh._adapters.inhouse.codegen import generated
 from mbh._adapters.inhouse.stepping import (compiled_joint, compiled_multistep, kernel_step,
                                             loop_codes, on_demand)
+from mbh._adapters.inhouse.stepping.compiled_stepper import AUTO_MIN_CALLS, hand_back_note
 from mbh._adapters.inhouse.stepping.driver import FormulationStepper
 from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
 from mbh._adapters.integrators import integrator_class
@@ -47,6 +52,9 @@ JOINT_LOOP_TREATMENTS = ("none", "baumgarte", "direct")
 JOINT_LOOP_S = 60.0
 #: The run's note on its loop.
 COMPILED_NOTE = "joint coordinates stepped on their compiled loop (one compiled call a run)"
+#: The note of a run whose right-hand side was generated for its mechanism.
+GENERATED_NOTE = ("joint right-hand side generated for this mechanism (straight-line code traced "
+                  "from the kernel; the kernel serves the calls it declines)")
 
 
 def joint_loop_unsupported(integrator_name: str, treatment: str) -> str | None:
@@ -66,16 +74,16 @@ def joint_loop_unsupported(integrator_name: str, treatment: str) -> str | None:
 def joint_loop(integrator_name: str, treatment: str, loop: str) -> str | None:
     """The loop a joint-coordinate run of ``integrator_name+treatment`` takes for its ``loop``
     parameter (:data:`~mbh._adapters.inhouse.formulations.joint_coordinates.JOINT_LOOPS`):
-    ``"compiled"`` or ``"python"``; None when that loop does not run it (``compiled`` for a
-    method :func:`joint_loop_unsupported` names, ``generated``: no generated functions in joint
-    coordinates)."""
+    ``"generated"`` (the compiled loop with a generated right-hand side; ``auto`` too),
+    ``"compiled"`` or ``"python"``; None when that loop does not run it (``generated`` or
+    ``compiled`` for a method :func:`joint_loop_unsupported` names)."""
     runs_compiled = joint_loop_unsupported(integrator_name, treatment) is None
     if loop == "python":
         return "python"
     if loop == "auto":
-        return "compiled" if runs_compiled else "python"
-    if loop == "compiled" and runs_compiled:
-        return "compiled"
+        return "generated" if runs_compiled else "python"
+    if loop in ("generated", "compiled") and runs_compiled:
+        return loop
     return None
 
 
@@ -93,10 +101,15 @@ class JointLoopStepper(FormulationStepper):
     integrator_params, formulation_params : dict
         Resolved parameters of each part (``divergence_limit`` is the integrator's).
     grid : RunGrid
+    loop : str
+        The method's ``loop`` (``auto``, ``generated`` or ``compiled``): whether the right-hand
+        side is generated for the mechanism, and whether a short run may compile it
+        (:func:`_generated_right_hand_side`).
     """
 
     def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
-                 integrator_params: dict, formulation_params: dict, grid: RunGrid):
+                 integrator_params: dict, formulation_params: dict, grid: RunGrid,
+                 loop: str = "auto"):
         super().__init__(mech, formulation_class, formulation_params, grid)
         self._python = (mech, formulation_class, integrator_name, integrator_params,
                         formulation_params, grid)
@@ -107,9 +120,11 @@ class JointLoopStepper(FormulationStepper):
             method = compiled_multistep.method_arguments(method_class, integrator_params,
                                                          theta.size)
             dispatcher = compiled_joint.run_adams_bashforth_samples
+            calls_per_step = 1
         else:
             method = kernel_step.step_tableau(method_class.tableau)
             dispatcher = compiled_joint.run_one_step_samples
+            calls_per_step = method[0].shape[0]
         params = formulation.params
         projection = ((float(params["proj_tol"]), int(params["proj_max_iter"]),
                        float(formulation.cut))
@@ -126,16 +141,27 @@ class JointLoopStepper(FormulationStepper):
         self._rate_out = np.empty((targets.size, theta.size))
         #: The counters after each target's step: the cost up to the sample the run is at.
         self._counters_out = np.zeros((targets.size, loop_codes.COUNTERS), dtype=np.int64)
-        self._args = (theta, rate, 0.0, grid.dt, 0, targets, method, formulation.kernel_args,
-                      projection, self._limit, self._counters, self._theta_out, self._rate_out,
-                      self._counters_out)
+        self._args = (theta, rate, 0.0, grid.dt, 0, targets, method,
+                      (*formulation.kernel_args, generated.NEVER), projection, self._limit,
+                      self._counters, self._theta_out, self._rate_out, self._counters_out)
+        notes = []
+        self._generated = False
+        if loop != "compiled":
+            compile_new = (loop == "generated"
+                           or grid.steps(grid.t_end) * calls_per_step >= AUTO_MIN_CALLS
+                           or not on_demand.is_ready(dispatcher, self._args))
+            function, notes = generated.joint_function(formulation, theta, rate, compile_new)
+            self._generated = function is not generated.NEVER
+            self._args = (*self._args[:7], (*formulation.kernel_args, function), *self._args[8:])
         self._entry = on_demand.entry(dispatcher, self._args, "the joint-coordinate loop",
                                       JOINT_LOOP_S)
         #: (θ, θ̇, done, status, reached) of the run's call, once made.
         self._end: tuple | None = None
         #: Row of the kept states the run is at (None: the end of the call, after a failure).
         self._row: int | None = 0
-        self.notes.insert(1, COMPILED_NOTE)  # beside the model note, before the treatment's
+        self.notes[1:1] = [COMPILED_NOTE, *notes]  # beside the model note, before the treatment's
+        if self._generated:
+            self.notes.insert(2, GENERATED_NOTE)
 
     # -- stepping ------------------------------------------------------------------------------
     def _step_to(self, t: float) -> None:
@@ -181,6 +207,16 @@ class JointLoopStepper(FormulationStepper):
                           f"({took:.3g} s, left out of the wall time)")
         return answer
 
+    def run(self, grid: RunGrid, n_bodies: int):
+        """:meth:`Stepper.run`, with the note of the right-hand sides the generated function
+        handed back to the kernel (:func:`~.compiled_stepper.hand_back_note`)."""
+        trajectory = super().run(grid, n_bodies)
+        note = hand_back_note(int(self._counters[loop_codes.KERNEL_CALLS]),
+                              int(self._counters[loop_codes.RHS_EVALS]))
+        if self._generated and note:
+            trajectory.notes.append(note)
+        return trajectory
+
     # -- reading -------------------------------------------------------------------------------
     def _states(self, t: float) -> BodyStates:
         if self.steps == 0:
@@ -202,4 +238,5 @@ class JointLoopStepper(FormulationStepper):
                 "factorizations": own["factorizations"] + int(spent[loop_codes.FACTORIZATIONS]),
                 "newton_iterations": own["newton_iterations"]
                 + int(spent[loop_codes.NEWTON_ITERATIONS]),
-                "repartitions": 0, "passages": 0}
+                "repartitions": 0, "passages": 0,
+                "kernel_calls": int(spent[loop_codes.KERNEL_CALLS])}

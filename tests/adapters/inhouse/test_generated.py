@@ -504,9 +504,10 @@ def test_the_cholesky_form_of_the_augmented_mass_solve_matches_lu():
     v = r - np.linalg.pinv(jacobian) @ (jacobian @ r)
     mass, force = mass_and_forces.mass_and_forces_kernel(q, v, *formulation.dynamics.kernel_args)
     gamma = constraints.gamma(q, v, 0.0)
+    no_pivots = np.empty(0, np.int64)
     cholesky = dynamics.augmented_mass_acceleration(mass, jacobian, force, gamma,
-                                                    dynamics.ACCELERATION_CUT)
+                                                    dynamics.ACCELERATION_CUT, no_pivots)
     rho = np.trace(mass) / np.sum(jacobian * jacobian)
     lu = dynamics._lu_mass_acceleration(mass + rho * jacobian.T @ jacobian, jacobian, force,
-                                        gamma, dynamics.ACCELERATION_CUT)
+                                        gamma, dynamics.ACCELERATION_CUT, no_pivots)
     assert np.abs(cholesky - lu).max() <= 1e-11

@@ -402,9 +402,10 @@ def test_coords_is_listed_and_defaults_to_absolute():
 @pytest.mark.parametrize("method,message", [
     ("rk4+direct:coords=relative", "parameter 'coords' of 'rk4+direct' must be one of absolute, "
                                    "joint, auto, got 'relative'"),
-    ("rk4+direct:coords=joint,loop=generated", "parameter 'loop' of 'rk4+direct': coords=joint "
-                                               "has no loop=generated (there are no generated "
-                                               "functions in joint coordinates)"),
+    ("am2+direct:coords=joint,loop=generated", "parameter 'loop' of 'am2+direct': coords=joint "
+                                               "has no loop=generated (the compiled "
+                                               "joint-coordinate loop runs the explicit one-step "
+                                               "methods and ab1–ab5, not am2)"),
     ("rk4+penalty:coords=joint", "has no parameter coords"),
 ])
 def test_a_bad_coords_value_is_refused_by_name(method, message):

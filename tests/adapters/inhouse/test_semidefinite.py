@@ -8,11 +8,14 @@ import numpy as np
 import pytest
 
 from mbh._adapters.inhouse.bodies.kinematics import assemble
-from mbh._adapters.inhouse.numerics.linalg import (NULL_LEVEL, certified_solve, semidefinite_solve,
-                                                   truncated_solve)
+from mbh._adapters.inhouse.numerics.linalg import (NULL_LEVEL, certified_solve, pivot_order,
+                                                   semidefinite_solve, truncated_solve)
 from mbh._adapters.inhouse.formulations.stabilisation import NoStabilisation
 from mbh._harness.model import scenario
 from tests.helpers import parallel_revolute_fourbar
+
+#: The factorisation chooses its own pivots.
+NO_PIVOTS = np.empty(0, np.int64)
 
 
 def _semidefinite(kept_values, deficiency, seed):
@@ -36,15 +39,35 @@ def test_the_pivoted_solve_is_the_truncated_svds_solution(span):
         deficiency = 1 + k % 3 if k > 3 else 1
         matrix = _semidefinite(np.logspace(0, -span, k - deficiency), deficiency, k)
         rhs = np.random.default_rng(100 + k).normal(size=k)
-        certified, x = semidefinite_solve(matrix, rhs, 1e-10)
+        certified, x = semidefinite_solve(matrix, rhs, 1e-10, NO_PIVOTS)
         expected = truncated_solve(matrix, rhs, 1e-10)
         assert certified
         assert np.abs(x - expected).max() <= 1000 * 2.2e-16 * 10 ** span * np.abs(expected).max()
 
 
+def test_the_pivots_of_one_matrix_serve_a_neighbour():
+    """The order :func:`pivot_order` finds in one matrix with null directions, given to the solve
+    of a neighbour with the same null space (its kept eigenvalues moved by up to 30 %, which
+    reorders its diagonal), gives the truncated SVD's solution there, as the solve's own choice
+    does (the same bound as above, span 2); full rank has no pivot order."""
+    for k in range(4, 20):
+        deficiency = 1 + k % 3
+        rng = np.random.default_rng(k)
+        values = np.logspace(0, -2, k - deficiency)
+        pivots = pivot_order(_semidefinite(values, deficiency, k), 1e-10)
+        assert pivots.dtype == np.int64 and pivots.size == k - deficiency
+        neighbour = _semidefinite(values * rng.uniform(0.7, 1.3, values.size), deficiency, k)
+        rhs = rng.normal(size=k)
+        certified, x = semidefinite_solve(neighbour, rhs, 1e-10, pivots)
+        expected = truncated_solve(neighbour, rhs, 1e-10)
+        assert certified
+        assert np.abs(x - expected).max() <= 1000 * 2.2e-16 * 1e2 * np.abs(expected).max()
+    assert pivot_order(_semidefinite(np.logspace(0, -2, 6), 0, 1), 1e-10).size == 0
+
+
 def test_full_rank_is_left_to_the_plain_cholesky():
     matrix = _semidefinite(np.logspace(0, -3, 6), 0, 1)
-    certified, x = semidefinite_solve(matrix, np.ones(6), 1e-10)
+    certified, x = semidefinite_solve(matrix, np.ones(6), 1e-10, NO_PIVOTS)
     assert not certified and x.size == 0
     certified, x = certified_solve(matrix, np.ones(6), 1e-10)
     assert certified and np.allclose(matrix @ x, np.ones(6), rtol=0, atol=1e-12)
@@ -57,7 +80,7 @@ def test_a_small_direction_that_is_not_null_is_left_to_the_svd(small):
     decide it otherwise."""
     matrix = _semidefinite(np.array([1.0, 0.5, 0.2, small]), 1, 7)
     assert small > NULL_LEVEL
-    certified, x = semidefinite_solve(matrix, np.ones(5), 1e-3)
+    certified, x = semidefinite_solve(matrix, np.ones(5), 1e-3, NO_PIVOTS)
     assert not certified and x.size == 0
 
 
@@ -65,7 +88,7 @@ def test_a_kept_direction_close_to_the_cut_is_left_to_the_svd():
     """Kept eigenvalues down to 1.5e-10 of the largest, just above the cut 1e-10, and one null
     direction: neither a certified kept part nor a certified null one."""
     matrix = _semidefinite(np.logspace(0, np.log10(1.5e-10), 5), 1, 3)
-    certified, x = semidefinite_solve(matrix, np.ones(6), 1e-10)
+    certified, x = semidefinite_solve(matrix, np.ones(6), 1e-10, NO_PIVOTS)
     assert not certified and x.size == 0
 
 
