@@ -35,6 +35,7 @@ that imports them, a campaign's workers included, installs it itself.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -48,7 +49,7 @@ import llvmlite
 import numba
 from numba.core import caching, event
 
-from mbh._harness.common import file_lock
+from mbh._harness.common import file_lock, waits
 from mbh._harness.common.locations import (ADAPTERS_FOLDER, CODE_ROOT, HARNESS_FOLDER,
                                            generated_cache, user_cache)
 
@@ -109,6 +110,32 @@ def kernel_folder() -> Path:
         _prune(root)
         return folder
     raise OSError(f"no writable folder for compiled kernels ({user_cache() / 'numba'})")
+
+
+@contextlib.contextmanager
+def first_use(name: str, what: str, estimate_s: float):
+    """Announce the block as compiling ``what`` (:mod:`mbh._harness.common.waits`, with
+    ``estimate_s``) unless a block of this ``name`` ended well before with this code on this
+    machine: for the kernels called from Python (numba compiles each at its first call, so
+    there is no loop to ask for)."""
+    marker = kernel_folder() / "ready" / name
+    if marker.exists():
+        yield
+        return
+    with waits.said(f"compiling {what}", "once on this machine", estimate_s):
+        yield
+    mark_ready(marker)
+
+
+def mark_ready(marker: Path) -> None:
+    """Leave ``marker``, the file saying that something was compiled with this code on this
+    machine (:func:`first_use`, the compiled loops of
+    :mod:`mbh._adapters.inhouse.stepping.on_demand`)."""
+    try:
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+    except OSError:  # an unwritable cache only loses the mark: the next run asks numba again
+        pass
 
 
 def _prune(root: Path) -> None:

@@ -43,6 +43,7 @@ An open chain has no closure: θ̈ = M_θ⁻¹Q_θ and every treatment is the sa
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 
@@ -58,6 +59,7 @@ from mbh._adapters.inhouse.formulations.stabilisation import (Baumgarte, DirectC
 from mbh._adapters.inhouse.numerics.linalg import truncated_solve
 from mbh._adapters.inhouse.numerics.rank import RANK_TOLERANCE, full_pivot_elimination
 from mbh._adapters.integrators.base import SecondOrderSystem
+from mbh._harness.common.kernel_cache import first_use
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.topology import DisconnectedGraphError
 
@@ -71,6 +73,11 @@ COORDINATES = ("absolute", "joint", "auto")
 #: ``auto`` (``generated`` where the loop runs the method, except that a short run compiles no
 #: new generated function, as the absolute model's ``auto``; else Python).
 JOINT_LOOPS = ("auto", "generated", "compiled", "python")
+#: What the announcement of :attr:`JointCoordinates.pivots`' first compilation says to expect, s:
+#: the reduced kernel 21.4 s and the pivots' own 6.1 s on an empty cache (Bricard,
+#: benchmarks/compile_cost.py, 2-core machine, 2026-11-29); ~6 s once the right-hand side is
+#: compiled.
+PIVOTS_COMPILE_S = 28.0
 
 
 def joint_coordinates_unsupported(mech: Mechanism) -> str | None:
@@ -204,9 +211,6 @@ class JointCoordinates(SecondOrderSystem):
         self.counters = {"jacobian_evals": 0, "factorizations": 0, "newton_iterations": 0}
         self._args = self._kernel_args()
         self.rank, self.redundant = self._rank_at(self.kinematics.theta0)
-        #: The start's pivot order of the range-space solve where closure rows are redundant
-        #: (:func:`~.dynamics.range_space_pivots`), (rank,) int64; empty otherwise.
-        self.pivots = self._start_pivots()
         self.notes = [self._model_note(tree)]
 
     def _rank_at(self, theta) -> tuple[int, tuple[str, ...]]:
@@ -219,15 +223,21 @@ class JointCoordinates(SecondOrderSystem):
         left = sorted(set(range(self.closure.m)) - set(np.asarray(rows[:rank]).tolist()))
         return int(rank), tuple(self.closure.labels[i] for i in left)
 
-    def _start_pivots(self) -> np.ndarray:
-        """The range-space solve's pivot order at θ₀ where closure rows are redundant: every
-        later solve takes its rows in that order while its certificate holds, so its path (and a
-        generated right-hand side's guards) stays the same along the run."""
+    @functools.cached_property
+    def pivots(self) -> np.ndarray:
+        """The range-space solve's pivot order at θ₀ where closure rows are redundant
+        (:func:`~.dynamics.range_space_pivots`), (rank,) int64; empty otherwise.  Every later
+        solve takes its rows in that order while its certificate holds, so its path (and a
+        generated right-hand side's guards) stays the same along the run.  Made when first
+        asked for (by the first right-hand side), not at construction: for redundant closures
+        it compiles the reduced kernel and the pivoted factorisation, announced."""
         if not self.redundant:
             return np.empty(0, np.int64)
         theta = self.kinematics.theta0
-        mass, _, c, _ = self.reduced(0.0, theta, np.zeros(theta.size))
-        return range_space_pivots(mass, np.ascontiguousarray(c), ACCELERATION_CUT)
+        with first_use("joint-start-pivots", "the joint reduced kernel and the start's pivot "
+                       "order of redundant closure rows", PIVOTS_COMPILE_S):
+            mass, _, c, _ = self.reduced(0.0, theta, np.zeros(theta.size))
+            return range_space_pivots(mass, np.ascontiguousarray(c), ACCELERATION_CUT)
 
     def _model_note(self, tree) -> str:
         """The run's note on its model: coordinates, closure equations, redundant ones."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from mbh._adapters.base import RunFailure, RunGrid, Stepper
-from mbh._adapters.inhouse.stepping import on_demand
+from mbh._harness.common.kernel_cache import first_use
 from mbh._adapters.inhouse.bodies.constraints import layout_of
 from mbh._adapters.inhouse.formulations.fold import Passages
 from mbh._adapters.inhouse.bodies.kinematics import common_start
@@ -64,7 +64,7 @@ class FormulationStepper(Stepper):
         self.grid = grid
         self.layout = layout_of(mech)
         # Per formulation: each calls its own kernels at its construction (ρ̂ only some).
-        with on_demand.first_use(f"start-{formulation_class.__name__}",
+        with first_use(f"start-{formulation_class.__name__}",
                                  "the kernels of the start and of the formulations "
                                  "(Φ, Φ_q, γ, the rank, ρ̂)", START_COMPILE_S):
             assembly = common_start(mech)
@@ -100,7 +100,7 @@ class InhouseStepper(FormulationStepper):
         super().__init__(mech, formulation_class, formulation_params, grid)
         formulation, (q0, v0) = self.formulation, self._start_state
         formulation.start(q0, v0)
-        with on_demand.first_use(f"warm-up-{formulation_class.__name__}",
+        with first_use(f"warm-up-{formulation_class.__name__}",
                                  "the formulation's right-hand side and projection",
                                  RIGHT_HAND_SIDE_COMPILE_S):
             formulation.warm_up(q0, v0)

@@ -12,11 +12,10 @@ steps alone) rather than wait a minute or more for the kernels' loop it may neve
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 
 from mbh._harness.common import file_lock, waits
-from mbh._harness.common.kernel_cache import kernel_folder
+from mbh._harness.common.kernel_cache import kernel_folder, mark_ready
 
 #: What the announcement of a loop's compilation says to expect (:func:`entry`), s: the generated steps' loop
 #: compiled in 1.9 s, the one-step methods' full loop from an empty cache in ~160 s (its
@@ -66,29 +65,6 @@ def entry(dispatcher, args: tuple, what: str, estimate_s: float):
             else:
                 with waits.said(f"compiling {what}", "once on this machine", estimate_s):
                     dispatcher.compile(types)
-                _mark(marker)
+                mark_ready(marker)
         overload = dispatcher.overloads[types]
     return overload.entry_point
-
-
-@contextlib.contextmanager
-def first_use(name: str, what: str, estimate_s: float):
-    """Announce the block as compiling ``what`` (:mod:`mbh._harness.common.waits`, with
-    ``estimate_s``) unless a block of this ``name`` ended well before with this code on this
-    machine: for the kernels called from Python (numba compiles each at its first call, so
-    there is no loop to ask for)."""
-    marker = kernel_folder() / "ready" / name
-    if marker.exists():
-        yield
-        return
-    with waits.said(f"compiling {what}", "once on this machine", estimate_s):
-        yield
-    _mark(marker)
-
-
-def _mark(marker) -> None:
-    try:
-        marker.parent.mkdir(parents=True, exist_ok=True)
-        marker.touch()
-    except OSError:  # an unwritable cache only loses the mark: the next run asks numba again
-        pass
