@@ -103,8 +103,8 @@ class JointLoopStepper(FormulationStepper):
     grid : RunGrid
     loop : str
         The method's ``loop`` (``auto``, ``generated`` or ``compiled``): whether the right-hand
-        side is generated for the mechanism, and whether a short run may compile it
-        (:func:`_generated_right_hand_side`).
+        side is generated for the mechanism, and whether a run of fewer than
+        :data:`~.compiled_stepper.AUTO_MIN_CALLS` right-hand sides may compile it.
     """
 
     def __init__(self, mech: Mechanism, formulation_class, integrator_name: str,
@@ -141,18 +141,22 @@ class JointLoopStepper(FormulationStepper):
         self._rate_out = np.empty((targets.size, theta.size))
         #: The counters after each target's step: the cost up to the sample the run is at.
         self._counters_out = np.zeros((targets.size, loop_codes.COUNTERS), dtype=np.int64)
-        self._args = (theta, rate, 0.0, grid.dt, 0, targets, method,
-                      (*formulation.kernel_args, generated.NEVER), projection, self._limit,
-                      self._counters, self._theta_out, self._rate_out, self._counters_out)
-        notes = []
-        self._generated = False
+        def loop_args(function) -> tuple:
+            """The loop's arguments with ``function`` the right-hand side it asks first."""
+            return (theta, rate, 0.0, grid.dt, 0, targets, method,
+                    (*formulation.kernel_args, function), projection, self._limit,
+                    self._counters, self._theta_out, self._rate_out, self._counters_out)
+
+        function, notes = generated.NEVER, []
         if loop != "compiled":
+            # As the absolute model's auto: a short run compiles no new function, unless the
+            # loop itself is to be compiled (seconds more on a minute).
             compile_new = (loop == "generated"
                            or grid.steps(grid.t_end) * calls_per_step >= AUTO_MIN_CALLS
-                           or not on_demand.is_ready(dispatcher, self._args))
+                           or not on_demand.is_ready(dispatcher, loop_args(function)))
             function, notes = generated.joint_function(formulation, theta, rate, compile_new)
-            self._generated = function is not generated.NEVER
-            self._args = (*self._args[:7], (*formulation.kernel_args, function), *self._args[8:])
+        self._generated = function is not generated.NEVER
+        self._args = loop_args(function)
         self._entry = on_demand.entry(dispatcher, self._args, "the joint-coordinate loop",
                                       JOINT_LOOP_S)
         #: (θ, θ̇, done, status, reached) of the run's call, once made.
