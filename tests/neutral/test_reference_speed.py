@@ -59,12 +59,16 @@ def _neutral(mech):
 
 
 def _sampled_states(mech):
-    """States along the shipped reference of ``mech`` (consistent and moving)."""
+    """States along the shipped reference of ``mech`` (consistent and moving), as writable
+    copies: the states the reference build passes to the compiled kernels are writable, the
+    stored reference's read-only, and numba compiles a kernel again for read-only arguments
+    (eleven neutral kernels, ~30 s of a suite's first run, for nothing the product runs)."""
     trajectory = reference_trajectory(mech)
     for fraction in SAMPLE_FRACTIONS:
         k = int(round(fraction * (trajectory.n_samples - 1)))
-        yield BodyStates(trajectory.position[k], trajectory.quaternion[k], trajectory.velocity[k],
-                         trajectory.angular_velocity[k])
+        yield BodyStates(*(array[k].copy() for array in (
+            trajectory.position, trajectory.quaternion, trajectory.velocity,
+            trajectory.angular_velocity)))
 
 
 @pytest.fixture(scope="module", params=ALL_SCENES)

@@ -218,8 +218,9 @@ class JointCoordinates(SecondOrderSystem):
         2009, eq. 1.49)."""
         if not self.closure.m:
             return 0, ()
-        rank, rows = full_pivot_elimination(np.ascontiguousarray(self.closure_jacobian(0.0, theta)),
-                                            RANK_TOLERANCE)
+        # At its default tolerance (RANK_TOLERANCE) left out: passed, it is typed float64 and
+        # numba compiles the elimination a third time (~4 s) beside the absolute model's call.
+        rank, rows = full_pivot_elimination(np.ascontiguousarray(self.closure_jacobian(0.0, theta)))
         left = sorted(set(range(self.closure.m)) - set(np.asarray(rows[:rank]).tolist()))
         return int(rank), tuple(self.closure.labels[i] for i in left)
 

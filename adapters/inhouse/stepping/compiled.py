@@ -208,9 +208,11 @@ def run_generated_samples(q, v, t0, dt, first, targets, tableau, generated, stab
     buffers = _step_buffers(tableau, q)
     states = buffers[3]
     hold_state(states, 0, q, v)
-    slot, k, reached, status = _generated_run(first, targets, 0, t0, dt, tableau, generated,
-                                              stabilisation, projection, limit, passage,
-                                              counters, buffers, q_out, v_out)
+    # No target reached yet, typed int64 as run_samples passes it: a literal 0 had numba compile
+    # _generated_run a second time, for Literal[int](0).
+    slot, k, reached, status = _generated_run(first, targets, np.int64(0), t0, dt, tableau,
+                                              generated, stabilisation, projection, limit,
+                                              passage, counters, buffers, q_out, v_out)
     if status == RUNNING and reached < targets.shape[0]:  # a passage is planned
         status = DECLINED
     return states[slot, 0].copy(), states[slot, 1].copy(), k, status, reached

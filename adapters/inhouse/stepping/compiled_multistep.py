@@ -284,8 +284,11 @@ def _multistep_step(q, v, t, t_new, dt, method, model, partition, counters, buff
     a, psi, y_new = buffers[0], buffers[1], buffers[2]
     n = q.shape[0]
     if not _start_step(q, v, t, method, model, counters, a):
-        q_new, v_new = kernel_nystrom_step(q, v, t, dt, start_tableau, model, partition, PLAIN,
-                                     counters)
+        # The treatment typed int64, as the one-step loop passes it: the global PLAIN alone is a
+        # Literal[int](0), for which numba compiled kernel_nystrom_step (and its right-hand
+        # side) a second time.
+        q_new, v_new = kernel_nystrom_step(q, v, t, dt, start_tableau, model, partition,
+                                           np.int64(PLAIN), counters)
         return q_new, v_new, True
     for e in range(2 * n):
         psi[e] = _explicit_part(alpha, beta, history, dt, e)
@@ -377,7 +380,7 @@ def run_explicit_samples(q, v, t0, dt, first, targets, method, model, stabilisat
                     v_new[e] = _explicit_part(alpha, beta, history, dt, n + e)
             else:
                 q_new, v_new = kernel_nystrom_step(q, v, t, dt, start_tableau, model, partition,
-                                             PLAIN, counters)
+                                                   np.int64(PLAIN), counters)  # as above
                 made = -1
             if stabilisation == PROJECTED:
                 q_new, v_new = _projected(q_new, v_new, t_new, projection, model, counters)
