@@ -271,15 +271,16 @@ class JointCoordinates(SecondOrderSystem):
         """θ (n_θ,) moved onto Φ_θ = 0 (at t = 0) by Newton with C_θ's pseudo-inverse truncated
         at the rank tolerance (Rouvinen 2003, eq. 127 in θ), to round-off; the counters left as
         they were.  Where a generated right-hand side is traced
-        (:mod:`~mbh._adapters.inhouse.codegen.generated`)."""
+        (:mod:`~mbh._adapters.inhouse.codegen.generated`).  numpy's least squares, not the
+        compiled :func:`~..numerics.linalg.truncated_solve`: on an empty cache that compiled for
+        ~2 s before the trace, unannounced, for a point that enters no run's numbers."""
         if not self.closure.m:
             return theta
         jacobian_evals = self.counters["jacobian_evals"]
         moved = newton_onto(
             lambda x: self.closure_residual(0.0, x),
-            lambda x, residual: truncated_solve(
-                np.ascontiguousarray(self.closure_jacobian(0.0, x)),
-                np.ascontiguousarray(residual), RANK_TOLERANCE),
+            lambda x, residual: np.linalg.lstsq(self.closure_jacobian(0.0, x), residual,
+                                                rcond=RANK_TOLERANCE)[0],
             theta, {"proj_tol": 1e-15, "proj_max_iter": 20}, {"newton_iterations": 0})
         self.counters["jacobian_evals"] = jacobian_evals
         return moved
