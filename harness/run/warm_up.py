@@ -14,17 +14,20 @@ cases run in parallel processes, and a phase starts once the previous one has en
 cases load what the previous one compiled (the multistep and partitioned loops call the one-step
 loop's steps).  Within a phase a case may still call what another compiles: the one-step loop
 calls the kernels' right-hand side (about a minute and a half alone), and compiles its other
-callees meanwhile, then waits on that kernel's lock and loads it.  The processes the phases
-leave free take, first, the cases that need nothing the phases compile (the DAE solver's kernels
-and the joint-coordinate path: :data:`BESIDE_PHASES`), then the generated functions of the
-shipped scenes' ``default`` and ``best`` and the neutral reference routes of a scene that declares
-its branch.  A case that fails is reported, not raised: the runs that need its part compile it
-themselves.
+callees meanwhile, then waits on that kernel's lock and loads it.  The other cases need nothing
+the phases compile, or wait on its locks: the DAE solver's kernels and the joint-coordinate path
+(:data:`BESIDE_PHASES`), then the generated functions of the shipped scenes' ``default`` and
+``best`` and the neutral reference routes of a scene that declares its branch.  They run from
+the start on processes of their own at a lower priority (:data:`FILL_NICENESS`): they take the
+cores the phases leave idle, a process waiting on another's lock among them, without slowing the
+phases' chain, which sets the warm-up's length.  A case that fails is reported, not raised: the
+runs that need its part compile it themselves.
 """
 
 from __future__ import annotations
 
 import multiprocessing
+import os
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, as_completed, wait
 from dataclasses import dataclass
@@ -46,9 +49,8 @@ PHASES = (
      ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop")),
 )
 #: Cases that call nothing the phases compile but the kernels they share with the right-hand
-#: side (each waits on those kernels' locks and loads them): they take the first process the
-#: phases leave free, before the fill cases, so that they run while the one-step loop compiles
-#: instead of after it.  The joint-coordinate loops link the joint right-hand side (and direct's
+#: side (each waits on those kernels' locks and loads them): the first of the fill cases, so
+#: that they run while the one-step loop compiles instead of after it.  The joint-coordinate loops link the joint right-hand side (and direct's
 #: solves) that the Python path's case compiles: each waits on its lock, then compiles its own
 #: loop (one entry per method family and per treatment with or without the projection).
 BESIDE_PHASES = (
@@ -72,6 +74,10 @@ FILL_SCENES = ("fourbar", "slider_crank_planar", "simple_pendulum", "fourbar_spa
 NEUTRAL_FILL_SCENES = ("double_fourbar",)
 #: The method name of a fill case that runs a scene's neutral reference routes.
 NEUTRAL_ROUTES = "neutral reference routes"
+#: Nice increment of the fill cases' processes (Unix): under contention a phase's process gets
+#: ~9 of every 10 time slices (Linux's weights: 1024 against 110), so the fill cases use the
+#: cores the phases leave idle without lengthening the chain of phases.
+FILL_NICENESS = 10
 #: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md): the announcement.
 ESTIMATE_S = 200.0
 
@@ -135,10 +141,16 @@ def _run(case: WarmCase) -> Warmed:
     return Warmed(case, time.perf_counter() - began, problem)
 
 
+def _lower_priority() -> None:
+    """Initializer of the fill cases' processes: :data:`FILL_NICENESS` (where the system has it)."""
+    if hasattr(os, "nice"):
+        os.nice(FILL_NICENESS)
+
+
 def warm_up(jobs: int) -> list[Warmed]:
-    """Run :data:`PHASES` on ``jobs`` processes, :data:`BESIDE_PHASES` and the fill cases in the
-    processes a phase leaves idle; every case's :class:`Warmed`, in the order they ended."""
-    fill = _fill_cases()
+    """Run :data:`PHASES` on ``jobs`` processes and, from the start, :data:`BESIDE_PHASES` and
+    the fill cases on ``jobs`` processes of lower priority; every case's :class:`Warmed`, in the
+    order they ended."""
     done: list[Warmed] = []
 
     def record(future) -> None:
@@ -150,19 +162,18 @@ def warm_up(jobs: int) -> list[Warmed]:
     context = multiprocessing.get_context("spawn")  # fresh interpreters: nothing inherited
     with waits.said(f"compiling the in-house kernels and loops on {jobs} process(es)",
                     "once per machine and version of the kernels", ESTIMATE_S), \
-            ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
-        running: set = set()
+            ProcessPoolExecutor(max_workers=jobs, mp_context=context) as phases, \
+            ProcessPoolExecutor(max_workers=jobs, mp_context=context,
+                                initializer=_lower_priority) as fill:
+        running = {fill.submit(_run, case) for case in _fill_cases()}
         for phase in PHASES:
-            own = {pool.submit(_run, WarmCase(*case)) for case in phase}
+            own = {phases.submit(_run, WarmCase(*case)) for case in phase}
             running |= own
             while own:
-                while len(running) < jobs and fill:
-                    running.add(pool.submit(_run, fill.pop(0)))
                 finished, running = wait(running, return_when=FIRST_COMPLETED)
                 for future in finished:
                     record(future)
                 own -= finished
-        running |= {pool.submit(_run, case) for case in fill}
         for future in as_completed(running):
             record(future)
     return done
