@@ -109,10 +109,13 @@ def _keep_scenarios() -> list[str]:
     """Read the scenarios :data:`~mbh._harness.run.executor.WARM_SCENARIOS_ENV` names, and their stored
     references, inside :func:`mbh._harness.common.kept_files.keeping`, assemble each scene's start
     (:func:`mbh._harness.neutral.start.initial_state`, cached per scene) and compute what the measuring
-    stick derives from each reference alone (:func:`mbh._harness.measure.verdict.prepare_reference`),
-    so the cases forked from here find them done (a reference that is not stored yet is not
+    stick derives from each reference alone (:func:`mbh._harness.measure.verdict.prepare_reference`)
+    and the conditioning a failed case is labelled with
+    (:func:`mbh._harness.measure.failure_label.reference_conditioning`), so the cases forked from
+    here find them done (a reference that is not stored yet is not
     built: its cases read or build it as a cold worker does).  Returns what could not be read."""
     from mbh._harness.common.kept_files import keeping
+    from mbh._harness.measure.failure_label import reference_conditioning
     from mbh._harness.measure.verdict import prepare_reference
     from mbh._harness.model import scenario
     from mbh._harness.neutral.start import initial_state
@@ -128,6 +131,7 @@ def _keep_scenarios() -> list[str]:
                 stored = read_reference(mech)
                 if stored is not None:
                     prepare_reference(mech, stored[0])
+                    reference_conditioning(mech, stored[0])
             except Exception as error:  # noqa: BLE001 — its cases report it themselves
                 missed.append(f"scenario {name}: {error}")
     return missed

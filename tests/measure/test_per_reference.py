@@ -95,3 +95,30 @@ def test_a_frozen_reference_gives_the_verdict_and_metrics_of_a_writable_copy(fou
                         case_metrics(mech, judged, against)))
     assert results[0] == results[1] == results[2]
     assert np.isfinite(results[0][3]["max_energy_error_rel"])
+
+
+def test_the_conditioning_a_failure_is_labelled_with_is_kept_and_unchanged():
+    """A failed case's label reads the reference's conditioning: kept per frozen reference (the
+    template computes it for every case), read-only, and the same numbers as computed afresh on
+    a writable copy; the label of a run stopped at the double four-bar's first singular passage
+    is the same against both."""
+    from mbh._harness.measure.failure_label import label_failure, reference_conditioning
+    from mbh._harness.model.trajectory import Trajectory
+    from mbh._harness.neutral.conditioning import conditioning
+
+    mech = scenario.load("double_fourbar")
+    reference = reference_trajectory(mech)
+    kept = reference_conditioning(mech, reference)
+    assert reference_conditioning(mech, reference) is kept
+    fresh = conditioning(mech, writable_copy(reference))
+    assert np.array_equal(kept.ratio, fresh.ratio) and np.array_equal(kept.minima, fresh.minima)
+    assert (kept.rank, kept.n_rows, kept.threshold) == (fresh.rank, fresh.n_rows, fresh.threshold)
+    assert len(kept.minima), "the double four-bar passes singular positions"
+    with pytest.raises(ValueError):
+        kept.ratio[0] = 0.0
+    stopped_at = float(kept.times[kept.minima[0]])
+    failed = Trajectory.empty(len(mech.bodies), status="diverged", reason="test run",
+                              failure_time=stopped_at)
+    labels = [label_failure(mech, failed, against).reason
+              for against in (reference, writable_copy(reference))]
+    assert labels[0] == labels[1] and labels[0].startswith("singular configuration"), labels
