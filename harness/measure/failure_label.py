@@ -6,17 +6,13 @@ The redundant joint equations are counted at the shared start
 (:func:`mbh._harness.neutral.start.initial_state`, assembled once per scene and kept; the warm
 template assembles it for every case forked from it): ~1 ms, against ~5–9 ms when each failed case
 assembled the start again.  The reference's conditioning (an SVD of Φ_q at every reference sample,
-~0.1 s a scene) is kept per frozen reference (:func:`reference_conditioning`) and computed by the
-template for every scene of the campaign: measured on every fourth case of the nightly
-(2026-11-30), each of the 58 failed cases of 282 computed it again, 92 ms a case, a sixth of
-the campaign's per-case overhead.
+up to 0.5 s a scene) is kept per frozen reference (:func:`reference_conditioning`) and computed by
+the warm template for the scenes with many cases (:data:`CONDITION_AHEAD_CASES`).
 """
 
 from __future__ import annotations
 
 import dataclasses
-
-import numpy as np
 
 from mbh._harness.common.status import CaseStatus
 from mbh._harness.measure.per_reference import per_reference, read_only
@@ -36,14 +32,24 @@ def start_redundancy(mech: Mechanism) -> tuple[int, int]:
     return jacobian.shape[0] - len(independent_rows(jacobian)), jacobian.shape[0]
 
 
+#: Cases of one scene in a campaign from which the warm template computes the scene's
+#: conditioning before its first fork (:mod:`mbh._harness.run.warm`).  Measured 2026-11-30: on
+#: every fourth case of the nightly, each of the 58 failed cases of 282 computed it again, 92 ms a
+#: case, a sixth of the campaign's per-case overhead; ahead, the ten shipped scenes take 1.0 s
+#: (Bricard 0.48 s, slider_crank 0.18 s), which delays a campaign's first case, and the smoke
+#: campaign (5–12 cases a scene, few failed) took 5.2–5.8 s instead of 4.7–5.0 s.  Ahead pays
+#: from about two failed cases of a scene; the shipped campaigns with 30 or more cases a scene
+#: have several.
+CONDITION_AHEAD_CASES = 20
+
+
 @per_reference
 def reference_conditioning(mech: Mechanism, reference: Trajectory) -> Conditioning:
     """:func:`~mbh._harness.neutral.conditioning.conditioning` of ``reference``, kept per frozen
     reference (:mod:`mbh._harness.measure.per_reference`), its arrays read-only."""
-    found = conditioning(mech, reference)
-    return dataclasses.replace(found, times=read_only(np.array(found.times)),
-                               ratio=read_only(np.array(found.ratio)),
-                               minima=read_only(np.array(found.minima)))
+    found = conditioning(mech, reference)  # arrays of its own, none a view of the reference's
+    return dataclasses.replace(found, times=read_only(found.times), ratio=read_only(found.ratio),
+                               minima=read_only(found.minima))
 
 
 def label_failure(mech: Mechanism, trajectory: Trajectory,

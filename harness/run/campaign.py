@@ -27,6 +27,7 @@ finished case stays stored) and raises :class:`CampaignInterrupted`; ``resume`` 
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import json
@@ -35,6 +36,7 @@ import sys
 import threading
 
 from mbh._harness.common.status import RunStatus
+from mbh._harness.measure.failure_label import CONDITION_AHEAD_CASES
 from mbh._harness.model import scenario
 from mbh._harness.common.environment import code_fingerprint
 from mbh._harness.run.calibration import (CALIBRATION, WithCalibration, calibration_work,
@@ -269,6 +271,14 @@ def _sweep(campaign, store: RunStore, work, workers, backend: dict, quiet: bool)
     stability_sweep(searches, make_spec, run, store.add_sweep)
 
 
+def conditioned_ahead(campaign) -> set[str]:
+    """The scenarios whose failure-label conditioning the warm template computes ahead: those
+    with at least :data:`~mbh._harness.measure.failure_label.CONDITION_AHEAD_CASES` cases in
+    ``campaign``."""
+    counts = collections.Counter(spec.scenario for spec in campaign.cases)
+    return {name for name, cases in counts.items() if cases >= CONDITION_AHEAD_CASES}
+
+
 def run_campaign(campaign, *, workers: int | None = None, scheduler: str | None = None,
                  resume: str | None = None, reuse: bool = False, root=None, quiet: bool = False,
                  work=None, warm_workers: bool = True) -> RunStore:
@@ -340,7 +350,8 @@ def _run_campaign(campaign, *, workers, scheduler, resume, reuse, root, quiet, w
     # The template's start overlaps the references' preparation and, when it starts now, the
     # calibration in this process (mbh._harness.run.calibration).
     template_starting = (scheduler is None and warm_workers
-                         and WorkerProcesses.start_template(names, first_runs(campaign)))
+                         and WorkerProcesses.start_template(names, first_runs(campaign),
+                                                            conditioned_ahead(campaign)))
     prepare_references(names, say)
     backend = {"scheduler": scheduler, "warm": warm_workers}
     store = _open_store(campaign, resume, root)

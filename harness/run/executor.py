@@ -80,6 +80,11 @@ WARM_SCENARIOS_ENV = "MBH_WARM_SCENARIOS"
 #: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template which
 #: methods to run once before its first fork: a JSON list of [scenario, adapter, method, dt].
 WARM_METHODS_ENV = "MBH_WARM_METHODS"
+#: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template for
+#: which of its scenarios to compute, before its first fork, the reference's conditioning that
+#: labels a failed case (:func:`mbh._harness.measure.failure_label.reference_conditioning`): a
+#: JSON list of names or paths.
+WARM_CONDITIONED_ENV = "MBH_WARM_CONDITIONED"
 #: Environment variable by which :meth:`WorkerProcesses.start_template` tells the template to say
 #: its waits on stderr (its compilations on a machine where the kernels are not compiled yet), as
 #: the starting process does: "1", or empty for silence (``--quiet``).
@@ -251,14 +256,17 @@ class WorkerProcesses:
 
     @classmethod
     def start_template(cls, scenarios: Iterable[str] = (),
-                       methods: Iterable[tuple[str, str, str, float]] = ()) -> bool:
+                       methods: Iterable[tuple[str, str, str, float]] = (),
+                       conditioned: Iterable[str] = ()) -> bool:
         """Start the warm template now, in the background, so that its imports and warm-up
         (~1.5–1.8 s) overlap the caller's own preparation instead of delaying the first case.
         The template also reads ``scenarios`` (names or paths) and their stored references once,
         for every case forked from it (:data:`WARM_SCENARIOS_ENV`), and runs each of ``methods``
         ((scenario, adapter, method, dt s): one per method of the campaign) for a few steps, so
         that what a method loads on its first run (compiled loops and kernels, an engine's
-        libraries) is loaded once rather than in every case (:data:`WARM_METHODS_ENV`).  A
+        libraries) is loaded once rather than in every case (:data:`WARM_METHODS_ENV`), and
+        computes the failure label's conditioning of the references of ``conditioned``, a subset
+        of ``scenarios`` (:data:`WARM_CONDITIONED_ENV`).  A
         template that is already running is kept as it is; one that cannot start is left to
         :meth:`start`, which says so.  Returns whether a template started now (so that this
         process has time to spare)."""
@@ -267,6 +275,7 @@ class WorkerProcesses:
         before = getattr(server, "_forkserver_pid", None)
         told = {WARM_SCENARIOS_ENV: json.dumps(sorted(set(scenarios))),
                 WARM_METHODS_ENV: json.dumps([list(method) for method in methods]),
+                WARM_CONDITIONED_ENV: json.dumps(sorted(set(conditioned))),
                 WARM_SAY_ENV: "1" if waits.shown_on_stderr() else ""}
         with contextlib.suppress(OSError, EOFError, ValueError), _environment(told):
             multiprocessing.forkserver.ensure_running()

@@ -110,7 +110,8 @@ def _keep_scenarios() -> list[str]:
     references, inside :func:`mbh._harness.common.kept_files.keeping`, assemble each scene's start
     (:func:`mbh._harness.neutral.start.initial_state`, cached per scene) and compute what the measuring
     stick derives from each reference alone (:func:`mbh._harness.measure.verdict.prepare_reference`)
-    and the conditioning a failed case is labelled with
+    and, for the scenarios :data:`~mbh._harness.run.executor.WARM_CONDITIONED_ENV` names, the
+    conditioning a failed case is labelled with
     (:func:`mbh._harness.measure.failure_label.reference_conditioning`), so the cases forked from
     here find them done (a reference that is not stored yet is not
     built: its cases read or build it as a cold worker does).  Returns what could not be read."""
@@ -119,10 +120,11 @@ def _keep_scenarios() -> list[str]:
     from mbh._harness.measure.verdict import prepare_reference
     from mbh._harness.model import scenario
     from mbh._harness.neutral.start import initial_state
-    from mbh._harness.run.executor import WARM_SCENARIOS_ENV
+    from mbh._harness.run.executor import WARM_CONDITIONED_ENV, WARM_SCENARIOS_ENV
     from mbh._harness.store.reference_files import read_reference
 
     missed = []
+    conditioned = set(json.loads(os.environ.get(WARM_CONDITIONED_ENV) or "[]"))
     with keeping():
         for name in json.loads(os.environ.get(WARM_SCENARIOS_ENV) or "[]"):
             try:
@@ -131,7 +133,8 @@ def _keep_scenarios() -> list[str]:
                 stored = read_reference(mech)
                 if stored is not None:
                     prepare_reference(mech, stored[0])
-                    reference_conditioning(mech, stored[0])
+                    if name in conditioned:
+                        reference_conditioning(mech, stored[0])
             except Exception as error:  # noqa: BLE001 — its cases report it themselves
                 missed.append(f"scenario {name}: {error}")
     return missed

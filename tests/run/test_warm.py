@@ -1,5 +1,6 @@
 """The warm template (mbh._harness.run.warm) keeps the scenarios it was told to read and their
-references, runs the methods it was told once, and imports no pandas (that its cases store the rows of fresh interpreters:
+references, computes the failure label's conditioning of the scenes it was told, runs the
+methods it was told once, and imports no pandas (that its cases store the rows of fresh interpreters:
 tests/run/test_runner.py)."""
 
 from __future__ import annotations
@@ -9,8 +10,10 @@ import os
 import subprocess
 import sys
 
-from mbh._harness.run.campaign import first_runs
-from mbh._harness.run.executor import WARM_METHODS_ENV, WARM_SAY_ENV, WARM_SCENARIOS_ENV
+from mbh._harness.model import scenario
+from mbh._harness.run.campaign import conditioned_ahead, first_runs
+from mbh._harness.run.executor import (WARM_CONDITIONED_ENV, WARM_METHODS_ENV, WARM_SAY_ENV,
+                                      WARM_SCENARIOS_ENV)
 from mbh._harness.run.spec import load_campaign
 
 
@@ -85,3 +88,22 @@ print(waits.shown_on_stderr())
                               text=True, check=True)
         said[value] = done.stdout.strip()
     assert said == {"1": "True", "": "False"}
+
+
+def test_the_template_computes_the_conditioning_of_the_scenes_it_was_told():
+    """The failure label's conditioning is computed ahead for the scenes with many cases in the
+    campaign (none of the smoke's, every one of the nightly's) and only for those."""
+    assert conditioned_ahead(load_campaign("smoke")) == set()
+    nightly = load_campaign("nightly")
+    assert conditioned_ahead(nightly) == {spec.scenario for spec in nightly.cases}
+    script = """
+from mbh._harness.measure import per_reference
+import mbh._harness.run.warm
+print(sorted(key[1] for _, kept in per_reference._KEPT.values() for key in kept
+             if key[0] == "reference_conditioning"))
+"""
+    env = os.environ | {WARM_SCENARIOS_ENV: json.dumps(["fourbar", "slider_crank"]),
+                        WARM_CONDITIONED_ENV: json.dumps(["fourbar"])}
+    done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True,
+                          text=True, check=True)
+    assert done.stdout.strip() == repr([scenario.load("fourbar").content_hash]), done.stderr
