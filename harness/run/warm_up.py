@@ -50,9 +50,10 @@ PHASES = (
 )
 #: Cases that call nothing the phases compile but the kernels they share with the right-hand
 #: side (each waits on those kernels' locks and loads them): the first of the fill cases, so
-#: that they run while the one-step loop compiles instead of after it.  The joint-coordinate loops link the joint right-hand side (and direct's
-#: solves) that the Python path's case compiles: each waits on its lock, then compiles its own
-#: loop (one entry per method family and per treatment with or without the projection).
+#: that they run while the one-step loop compiles instead of after it.  The joint-coordinate
+#: loops link the joint right-hand side (and direct's solves) that the Python path's case
+#: compiles: each waits on its lock, then compiles its own loop (one entry per method family and
+#: per treatment with or without the projection).
 BESIDE_PHASES = (
     ("fourbar", "ida", 1e-3, 0.002, "the DAE solver's kernels"),
     ("fourbar", "rk4+direct:coords=joint,loop=python", 1e-3, 0.002,
