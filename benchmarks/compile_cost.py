@@ -1,7 +1,7 @@
 """What an ``mbh`` command compiles on a machine where nothing is compiled yet, and how long each
 function takes.
 
-Run:  .venv/bin/python benchmarks/compile_cost.py simulate fourbar --adapter inhouse \\
+Run:  .venv/bin/python benchmarks/compile_cost.py [--passes] simulate fourbar --adapter inhouse \\
           --method rk4+direct --dt 1e-3 --json
 
 The command runs in this process with an empty cache (a new temporary ``MBH_CACHE_HOME``, and
@@ -9,8 +9,12 @@ The command runs in this process with an empty cache (a new temporary ``MBH_CACH
 compilation.  It prints the command's wall time, the time numba spent compiling, and per
 function the time spent in the function itself (its callees' compilations taken out) and in all
 (inclusive), most first.  Generated functions (``cfunc``) are compiled without these events: their
-time is the rest of the wall time with the imports and the run.  Numbers are measured on the
-machine that runs it; nothing is asserted (docs/speed.md, "What a first run compiles").
+time is the rest of the wall time with the imports and the run.  With ``--passes`` it also prints,
+summed over every function, the time of each stage of numba's pipeline (its ``pipeline_times``:
+bytecode, inlining, type inference, lowering with LLVM's optimisation and machine code …), type
+inference without the callees it compiled inside it, and each listed function's three largest
+stages.  Numbers are measured on the machine that runs it; nothing is asserted (docs/speed.md,
+"What a first run compiles").
 """
 
 from __future__ import annotations
@@ -34,6 +38,8 @@ class CompileTimes(event.Listener):
         self.inclusive = collections.defaultdict(float)
         self.exclusive = collections.defaultdict(float)
         self.count = collections.Counter()
+        #: Per function, numba's stage → s summed over its compilations (:meth:`stages`).
+        self.stages = collections.defaultdict(collections.Counter)
         self._open: list[list] = []  # [name, start, time of the callees compiled inside]
 
     def on_start(self, event_):
@@ -49,9 +55,31 @@ class CompileTimes(event.Listener):
         self.count[name] += 1
         if self._open:
             self._open[-1][2] += took
+        result = event_.data["dispatcher"].overloads.get(tuple(event_.data["args"]))
+        for stage, seconds in pipeline_stages(result).items():
+            self.stages[name][stage] += seconds
+        # The callees compiled while this function's types were inferred are theirs, not its.
+        self.stages[name][TYPING] -= callees
+
+
+#: numba's type-inference stage, inside which a function's callees are compiled.
+TYPING = "nopython_type_inference"
+
+
+def pipeline_stages(result) -> dict[str, float]:
+    """Stage name → s of one compilation (``CompileResult.metadata["pipeline_times"]``: each
+    pass's init, run and finalize times, its ordinal prefix dropped); empty when numba kept none."""
+    stages = collections.Counter()
+    timings = (getattr(result, "metadata", None) or {}).get("pipeline_times", {})
+    for passes in timings.values():
+        for numbered, times in passes.items():
+            stages[numbered.split("_", 1)[-1]] += times.init + times.run + times.finalize
+    return stages
 
 
 def main(argv: list[str]) -> None:
+    by_stage = "--passes" in argv
+    argv = [arg for arg in argv if arg != "--passes"]
     folder = tempfile.mkdtemp(prefix="mbh-compile-cost-")
     os.environ["MBH_CACHE_HOME"] = os.path.join(folder, "cache")
     os.environ["MBH_RESULTS_DIR"] = os.path.join(folder, "results")
@@ -66,8 +94,18 @@ def main(argv: list[str]) -> None:
           f"(cache {folder})", file=sys.stderr)
     print(f"{'own s':>8} {'all s':>8} {'times':>5}  function", file=sys.stderr)
     for name, own in sorted(times.exclusive.items(), key=lambda item: -item[1])[:SHOWN]:
-        print(f"{own:8.2f} {times.inclusive[name]:8.2f} {times.count[name]:5d}  {name}",
+        largest = ""
+        if by_stage:
+            largest = "  " + ", ".join(f"{stage} {seconds:.1f}" for stage, seconds
+                                       in times.stages[name].most_common(3))
+        print(f"{own:8.2f} {times.inclusive[name]:8.2f} {times.count[name]:5d}  {name}{largest}",
               file=sys.stderr)
+    if by_stage:
+        total = sum(times.stages.values(), collections.Counter())
+        print("numba's stages, s summed over every function (type inference without the "
+              "callees compiled in it):", file=sys.stderr)
+        for stage, seconds in total.most_common(12):
+            print(f"{seconds:8.2f}  {stage}", file=sys.stderr)
 
 
 if __name__ == "__main__":
