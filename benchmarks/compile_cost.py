@@ -29,6 +29,8 @@ from numba.core import event
 
 #: Functions printed, most time first.
 SHOWN = 40
+#: numba's type-inference stage, inside which a function's callees are compiled.
+TYPING = "nopython_type_inference"
 
 
 class CompileTimes(event.Listener):
@@ -38,7 +40,7 @@ class CompileTimes(event.Listener):
         self.inclusive = collections.defaultdict(float)
         self.exclusive = collections.defaultdict(float)
         self.count = collections.Counter()
-        #: Per function, numba's stage → s summed over its compilations (:meth:`stages`).
+        #: Per function, numba's stage → s summed over its compilations (:func:`pipeline_stages`).
         self.stages = collections.defaultdict(collections.Counter)
         self._open: list[list] = []  # [name, start, time of the callees compiled inside]
 
@@ -55,15 +57,12 @@ class CompileTimes(event.Listener):
         self.count[name] += 1
         if self._open:
             self._open[-1][2] += took
-        result = event_.data["dispatcher"].overloads.get(tuple(event_.data["args"]))
-        for stage, seconds in pipeline_stages(result).items():
-            self.stages[name][stage] += seconds
-        # The callees compiled while this function's types were inferred are theirs, not its.
-        self.stages[name][TYPING] -= callees
-
-
-#: numba's type-inference stage, inside which a function's callees are compiled.
-TYPING = "nopython_type_inference"
+        stages = pipeline_stages(event_.data["dispatcher"].overloads.get(
+            tuple(event_.data["args"])))
+        if stages:
+            # The callees compiled while this function's types were inferred are theirs.
+            stages[TYPING] -= callees
+            self.stages[name].update(stages)
 
 
 def pipeline_stages(result) -> dict[str, float]:
