@@ -168,7 +168,7 @@ class Passages:
     @property
     def arrays(self) -> tuple:
         """(placement, rho_zone, indicators, count), as :func:`mbh._adapters.inhouse.stepping.compiled.
-        run_steps` takes them."""
+        run_samples` takes them."""
         return self.placement, self.rho_zone, self.indicators, self.count
 
     def plan(self, k: int, dt: float, last: int):

@@ -332,33 +332,69 @@ def _step_and_check(q, v, t, t_new, tableau, model, stabilisation, projection, p
 @njit(cache=True)
 def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, projection,
                 partition, check_due, limit, passage, counters, q_out, v_out):
-    """:func:`run_steps` from step ``first`` on through every step index of ``targets``, keeping
-    the state at each: a whole run in one call, for formulations whose states are read without
-    side effects (every one but partitioning, whose reading moves its Newton start).
+    """Steps ``first + 1`` on of a fixed-step run from the state (q, q̇) after step ``first``,
+    through every step index of ``targets``, keeping the state at each: a whole run in one call.
+    Partitioning calls it for one target at a time, since its reading of a state moves its
+    Newton start.
 
     Parameters
     ----------
+    q, v : ndarray, shape (n,)
+        Integrated state after step ``first`` (t = t0 + first·dt): every coordinate, or the
+        independent ones when partitioning; not modified.
+    t0, dt : float
+        Start time and step, s.  Step k ends at t0 + k·dt (no accumulated drift).
+    first : int
     targets : ndarray of int64, shape (k,)
         Increasing step indices, none before ``first``.
+    tableau : tuple (c (s,), A⁺ (s + 1, s), Ā⁺ (s + 1, s))
+        :func:`step_tableau` of the :class:`~mbh._adapters.integrators.nystrom.NystromTableau`.
+    model : tuple
+        (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
+        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
+        :attr:`ConstraintSystem.sparsity`'s arrays, the five generated functions of
+        :func:`.generated.functions`, whether the generated steps run, bool: every function the
+        formulation calls was generated (:data:`GENERATED_STEPS`), and the right-hand side
+        kernel's entry (:data:`RIGHT_HAND_SIDE`, :mod:`.native_call`)).
+    stabilisation : int
+        :data:`PLAIN`, :data:`PROJECTED` (``direct``) or :data:`PARTITIONED`.
+    projection : tuple (proj_tol, proj_max_iter, cut)
+        Projection tolerance, iteration limit and truncation of the pseudo-inverse.
+    partition : tuple
+        The state of :func:`expand` (empty arrays unless partitioning).
+    check_due : ndarray of int64, shape (1,)
+        Whether the split is checked before the next step; updated in place.
+    limit : float
+        Divergence limit on the 2-norms of q and q̇.
+    passage : tuple (placement (3,), rho_zone, indicators (2,), count (1,) int64)
+        Placed passages of singular positions (:mod:`mbh._adapters.inhouse.formulations.fold`; zero placement
+        turns them off): (c*, g/2) of the tableau and the formulation's clearance,
+        :data:`~mbh._adapters.inhouse.formulations.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
+        points (updated in place) and the number of passages placed (incremented in place).
+    counters : ndarray of int64, shape (5,)
+        Incremented in place (:data:`RHS_EVALS` …).
     q_out, v_out : ndarray, shape (k, n)
         Row i receives the state after step ``targets[i]``; rows from ``reached`` on are left
         as they were.
-    (the others as :func:`run_steps`)
 
     Returns
     -------
-    q, v, done, status
-        As :func:`run_steps` returns them, ``status`` :data:`RUNNING` when every target was
-        reached.
+    q, v : ndarray
+        The last good state.
+    done : int
+        Index of the last good step.
+    status : int
+        :data:`RUNNING` when every target was reached, :data:`REPARTITION` when the split must be
+        chosen again before step ``done + 1``, else the code of the failure in that step.
     reached : int
         Number of targets whose state was stored.
 
-    One call for a whole run: a call of :func:`run_steps` per sample, passing the model's ~40
-    arrays each time, cost 0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).
-    The stepping loop is written here, not in a function that both entries call: numba compiles a
+    One call for a whole run: a call per sample, passing the model's ~40 arrays each time, cost
+    0.15 ms of a 2.75 ms four-bar run (400 samples, rk4+baumgarte at 5 ms).  The stepping loop is
+    written here, not in a function that a one-target entry would call as well: numba compiles a
     called function into a library of its own and then the caller's library again with all of it
-    linked in, so a wrapper of a few lines cost as much compile time as the loop (docs/speed.md).
-    A placed passage ends by the next target.
+    linked in, so a wrapper of a few lines cost as much compile time as the loop
+    (docs/speed.md).  A placed passage ends by the next target.
     """
     placement, rho_zone, indicators, passages = passage
     buffers = _step_buffers(tableau, q)
@@ -412,59 +448,3 @@ def run_samples(q, v, t0, dt, first, targets, tableau, model, stabilisation, pro
             if status != RUNNING:
                 return q, v, k, status, reached
         check_due[0] = 1
-
-
-@njit(cache=True)
-def run_steps(q, v, t0, dt, first, last, tableau, model, stabilisation, projection, partition,
-              check_due, limit, passage, counters):
-    """Steps ``first + 1 … last`` of a fixed-step run from the state (q, q̇) after step ``first``.
-
-    Parameters
-    ----------
-    q, v : ndarray, shape (n,)
-        Integrated state after step ``first`` (t = t0 + first·dt): every coordinate, or the
-        independent ones when partitioning; not modified.
-    t0, dt : float
-        Start time and step, s.  Step k ends at t0 + k·dt (no accumulated drift).
-    first, last : int
-    tableau : tuple (c (s,), A⁺ (s + 1, s), Ā⁺ (s + 1, s))
-        :func:`step_tableau` of the :class:`~mbh._adapters.integrators.nystrom.NystromTableau`.
-    model : tuple
-        (gains (2,) Baumgarte (α, β) in 1/s or zeros, rows (r,) constraint rows in the solves,
-        :attr:`ConstraintSystem.kernel_args`, :attr:`Dynamics.kernel_args`,
-        :attr:`ConstraintSystem.sparsity`'s arrays, the five generated functions of
-        :func:`.generated.functions`, and whether the generated steps run, bool: every
-        function the formulation calls was generated; :data:`GENERATED_STEPS`).
-    stabilisation : int
-        :data:`PLAIN`, :data:`PROJECTED` (``direct``) or :data:`PARTITIONED`.
-    projection : tuple (proj_tol, proj_max_iter, cut)
-        Projection tolerance, iteration limit and truncation of the pseudo-inverse.
-    partition : tuple
-        The state of :func:`expand` (empty arrays unless partitioning).
-    check_due : ndarray of int64, shape (1,)
-        Whether the split is checked before the next step; updated in place.
-    limit : float
-        Divergence limit on the 2-norms of q and q̇.
-    passage : tuple (placement (3,), rho_zone, indicators (2,), count (1,) int64)
-        Placed passages of singular positions (:mod:`mbh._adapters.inhouse.formulations.fold`; zero placement
-        turns them off): (c*, g/2) of the tableau and the formulation's clearance,
-        :data:`~mbh._adapters.inhouse.formulations.fold.FOLD_ZONE` × ρ̂ at the start, ρ̂ at the last two grid
-        points (updated in place) and the number of passages placed (incremented in place).
-    counters : ndarray of int64, shape (5,)
-        Incremented in place (:data:`RHS_EVALS` …).
-
-    Returns
-    -------
-    q, v : ndarray
-        The last good state.
-    done : int
-        Index of the last good step.
-    status : int
-        :data:`RUNNING` when step ``last`` was reached, :data:`REPARTITION` when the split must
-        be chosen again before step ``done + 1``, else the code of the failure in that step.
-    """
-    q, v, done, status, _ = run_samples(q, v, t0, dt, first, np.array([last]), tableau, model,
-                                        stabilisation, projection, partition, check_due, limit,
-                                        passage, counters, np.empty((1, q.shape[0])),
-                                        np.empty((1, v.shape[0])))
-    return q, v, done, status

@@ -35,7 +35,8 @@ reports the cost up to there, as the Python loop, which has stepped no further);
 :func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel` (its ``tree``,
 ``dynamics``, ``closure``, ``m_c``, ``gains``, ``cut``, ``pivots``) and the generated right-hand
 side (:func:`~mbh._adapters.inhouse.codegen.generated.joint_function`, or
-:data:`~mbh._adapters.inhouse.codegen.generated.NEVER`: the kernel for every call);
+:data:`~mbh._adapters.inhouse.codegen.generated.NEVER`: the kernel for every call), then the
+kernel's entry (:class:`~mbh._adapters.inhouse.stepping.native_call.NativeEntry`);
 ``projection`` None (``none``, ``baumgarte``: its code is then not compiled) or (proj_tol,
 proj_max_iter, the pseudo-inverse's relative cut) of ``direct``; ``limit`` the divergence limit
 on the 2-norms of θ and θ̇; ``counters`` (:data:`~.loop_codes.COUNTERS`,) int64, incremented in
@@ -53,7 +54,6 @@ from numba import njit
 
 from mbh._adapters.inhouse.bodies import kernels
 from mbh._adapters.inhouse.bodies.tree_pass import tree_pass
-from mbh._adapters.inhouse.formulations.joint_rhs import acceleration_kernel
 from mbh._adapters.inhouse.numerics.linalg import truncated_solve
 from mbh._adapters.inhouse.stepping.compiled import _divergence, _keep_targets
 from mbh._adapters.inhouse.stepping.compiled_multistep import _explicit_part
@@ -62,20 +62,22 @@ from mbh._adapters.inhouse.stepping.kernel_step import (combine_stages, count_ev
 from mbh._adapters.inhouse.stepping.loop_codes import (FACTORIZATIONS, FAILED_LINALG,
                                                        JACOBIAN_EVALS, KERNEL_CALLS,
                                                        NEWTON_ITERATIONS, RUNNING)
+from mbh._adapters.inhouse.stepping.native_call import call_native
 
 
 @njit(cache=True, inline="always")
 def _acceleration(theta, rate, t, model, counters):
     """θ̈ (n_θ,) at (θ, θ̇, t): the generated function ``model[7]`` where it accepts the call,
-    else :func:`acceleration_kernel` on ``model``'s first seven entries, counted in
+    else :func:`~.joint_rhs.acceleration_kernel` on ``model``'s first seven entries, called
+    through its entry ``model[8]`` (:mod:`.native_call`) and counted in
     ``counters[KERNEL_CALLS]`` (entry by entry: a star-unpacked call after positional ones is
     bytecode numba does not take)."""
     out = np.empty(theta.shape[0])
     if model[7](theta, rate, t, out) == 1:
         return out
     counters[KERNEL_CALLS] += 1
-    return acceleration_kernel(theta, rate, t, model[0], model[1], model[2], model[3], model[4],
-                               model[5], model[6])
+    return call_native(model[8], (theta, rate, t, model[0], model[1], model[2], model[3],
+                                  model[4], model[5], model[6]))
 
 
 @njit(cache=True)

@@ -44,6 +44,8 @@ import numpy as np
 from mbh._adapters.base import RunFailure, RunGrid
 from mbh._adapters.inhouse.stepping import (compiled, compiled_multistep, kernel_step,
                                             loop_codes, on_demand)
+from mbh._adapters.inhouse.stepping.native_call import VECTOR, NativeEntry
+from mbh._adapters.inhouse.formulations.dynamics import index1_acceleration
 from mbh._adapters.inhouse.codegen import generated
 from mbh._adapters.inhouse.stepping.driver import FormulationStepper
 from mbh._adapters.inhouse.formulations.fold import Passages
@@ -60,7 +62,7 @@ from mbh._harness.common import waits
 from mbh._harness.model.mechanism import Mechanism
 from mbh._harness.model.trajectory import BodyStates
 
-#: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_steps`.
+#: Formulations with a compiled path and their stabilisation code in :func:`compiled.run_samples`.
 COMPILED_FORMULATIONS = {NoStabilisation.name: loop_codes.PLAIN, Baumgarte.name: loop_codes.PLAIN,
                          DirectCorrection.name: loop_codes.PROJECTED,
                          CoordinatePartitioning.name: loop_codes.PARTITIONED}
@@ -160,6 +162,9 @@ class CompiledStepper(FormulationStepper):
                                          range(self._sample_steps.size)))
         self._partitioned = self._code == loop_codes.PARTITIONED
         self._dispatcher = self._full_loop(method_class)
+        #: The right-hand side kernel the full loops call (:mod:`.native_call`), compiled or
+        #: loaded with the full loop (:meth:`_full_entry`).
+        self._right_hand_side = self._kernel_entry()
         self._model = self._model_tuple(generated.NOTHING, False)  # the types of the real one
         wanted = self._wanted_functions()
         compile_new = (loop == "generated"
@@ -189,8 +194,6 @@ class CompiledStepper(FormulationStepper):
 
     def _full_loop(self, method_class):
         """The numba dispatcher of the full compiled loop of this method and formulation."""
-        if self._partitioned:
-            return compiled.run_steps
         if not self._multistep:
             return compiled.run_samples
         return (compiled_multistep.run_explicit_samples if method_class.beta[0] == 0.0
@@ -203,7 +206,18 @@ class CompiledStepper(FormulationStepper):
         return (np.asarray(formulation.gains, dtype=float),
                 np.ascontiguousarray(formulation.rows), formulation.constraints.kernel_args,
                 formulation.dynamics.kernel_args, formulation.constraints.sparsity.arrays,
-                functions, every_one)
+                functions, every_one, self._right_hand_side)
+
+    def _kernel_entry(self) -> NativeEntry:
+        """The entry of :func:`index1_acceleration` for the arguments
+        :func:`~.kernel_step.kernel_acceleration` passes it from the model, not yet resolved."""
+        formulation = self.formulation
+        n = self._start_state[0].size
+        return NativeEntry(index1_acceleration,
+                           (np.zeros(n), np.zeros(n), 0.0, 0.0, 0.0,
+                            np.ascontiguousarray(formulation.rows),
+                            formulation.constraints.kernel_args, formulation.dynamics.kernel_args,
+                            formulation.constraints.sparsity.arrays), VECTOR)
 
     def _full_args(self) -> tuple:
         """Arguments of the full loop from the start (types as every call's)."""
@@ -220,6 +234,8 @@ class CompiledStepper(FormulationStepper):
             began = time.perf_counter()
             self._entry = on_demand.entry(self._dispatcher, self._full_args(),
                                           "the in-house kernels' loop", on_demand.FULL_LOOP_S)
+            on_demand.resolve(self._right_hand_side, "the in-house kernels' right-hand side",
+                              on_demand.RIGHT_HAND_SIDE_S)
             if self._generated_entry is not None:
                 took = time.perf_counter() - began
                 self.untimed_s += took
@@ -282,14 +298,17 @@ class CompiledStepper(FormulationStepper):
 
     # -- stepping ------------------------------------------------------------------------------
     def _steps_args(self, last: int) -> tuple:
-        """Arguments of :func:`compiled.run_steps` from the integrated state to step ``last``."""
-        return (self.q, self.v, 0.0, self.grid.dt, self.steps, last, self._method, self._model,
-                self._code, self._projection, self._partition, self._check_due, self._limit,
-                self.passages.arrays, self._counters)
+        """Arguments of :func:`compiled.run_samples` from the integrated state to step ``last``
+        alone (partitioning)."""
+        return (self.q, self.v, 0.0, self.grid.dt, self.steps, np.array([last]), self._method,
+                self._model, self._code, self._projection, self._partition, self._check_due,
+                self._limit, self.passages.arrays, self._counters, np.empty((1, self.q.size)),
+                np.empty((1, self.v.size)))
 
     def _run(self, last: int):
-        """:func:`compiled.run_steps` from the integrated state to step ``last``."""
-        return self._full_entry()(*self._steps_args(last))
+        """(q, v, done, status) of :func:`compiled.run_samples` from the integrated state to step
+        ``last``."""
+        return self._full_entry()(*self._steps_args(last))[:4]
 
     def _step_to(self, t: float) -> None:
         target = self._step_of_time.get(t)

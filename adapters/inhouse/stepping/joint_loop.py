@@ -35,6 +35,8 @@ from mbh._adapters.inhouse.stepping import (compiled_joint, compiled_multistep, 
 from mbh._adapters.inhouse.stepping.compiled_stepper import AUTO_MIN_CALLS, hand_back_note
 from mbh._adapters.inhouse.stepping.driver import FormulationStepper
 from mbh._adapters.inhouse.stepping.joint_stepper import JointStepper
+from mbh._adapters.inhouse.stepping.native_call import VECTOR, NativeEntry
+from mbh._adapters.inhouse.formulations.joint_rhs import acceleration_kernel
 from mbh._adapters.integrators import integrator_class
 from mbh._adapters.integrators.multistep import LinearMultistep
 from mbh._adapters.integrators.nystrom import NystromIntegrator
@@ -44,12 +46,11 @@ from mbh._harness.model.trajectory import BodyStates
 
 #: The treatments the compiled joint-coordinate loop runs.
 JOINT_LOOP_TREATMENTS = ("none", "baumgarte", "direct")
-#: What the announcement of the loop's first compilation says to expect, s: Adams–Bashforth's
-#: loop on Bricard took 61 s on an empty cache, 46 s of it the joint right-hand side it calls
-#: (benchmarks/compile_cost.py, 2-core machine, 2026-11-29); once the Python loop has compiled
-#: that right-hand side, 16 s (ab5), then 6 s (rk4) and 24 s (rk4+direct: the projection's
-#: solves).
-JOINT_LOOP_S = 60.0
+#: What the announcements of the first compilations say to expect, s: the joint right-hand side
+#: the loops call took 46 s on an empty cache, then Adams–Bashforth's loop 16 s, rk4's 6 s and
+#: rk4+direct's 24 s (the projection's solves) (benchmarks/compile_cost.py, 2-core machine,
+#: 2026-11-29, when the loops still held the right-hand side's code).
+JOINT_RIGHT_HAND_SIDE_S, JOINT_LOOP_S = 46.0, 24.0
 #: The run's note on its loop.
 COMPILED_NOTE = "joint coordinates stepped on their compiled loop (one compiled call a run)"
 #: The note of a run whose right-hand side was generated for its mechanism.
@@ -141,11 +142,16 @@ class JointLoopStepper(FormulationStepper):
         self._rate_out = np.empty((targets.size, theta.size))
         #: The counters after each target's step: the cost up to the sample the run is at.
         self._counters_out = np.zeros((targets.size, loop_codes.COUNTERS), dtype=np.int64)
+        #: The right-hand side kernel the loop calls (:mod:`.native_call`), resolved before it.
+        right_hand_side = NativeEntry(acceleration_kernel,
+                                      (theta, rate, 0.0, *formulation.kernel_args), VECTOR)
+
         def loop_args(function) -> tuple:
             """The loop's arguments with ``function`` the right-hand side it asks first."""
             return (theta, rate, 0.0, grid.dt, 0, targets, method,
-                    (*formulation.kernel_args, function), projection, self._limit,
-                    self._counters, self._theta_out, self._rate_out, self._counters_out)
+                    (*formulation.kernel_args, function, right_hand_side), projection,
+                    self._limit, self._counters, self._theta_out, self._rate_out,
+                    self._counters_out)
 
         function, notes = generated.NEVER, []
         if loop != "compiled":
@@ -159,6 +165,8 @@ class JointLoopStepper(FormulationStepper):
         self._args = loop_args(function)
         self._entry = on_demand.entry(dispatcher, self._args, "the joint-coordinate loop",
                                       JOINT_LOOP_S)
+        on_demand.resolve(right_hand_side, "the joint-coordinate right-hand side",
+                          JOINT_RIGHT_HAND_SIDE_S)
         #: (θ, θ̇, done, status, reached) of the run's call, once made.
         self._end: tuple | None = None
         #: Row of the kept states the run is at (None: the end of the call, after a failure).

@@ -14,7 +14,6 @@ from numba import njit
 from mbh._adapters.inhouse.bodies import kernels
 from mbh._adapters.inhouse.numerics.banded import (conditioning_indicator, min_norm_correction,
                                      min_norm_correction_and_indicator, pattern_matvec)
-from mbh._adapters.inhouse.formulations.dynamics import index1_acceleration
 from mbh._adapters.inhouse.codegen.generated import (ACCELERATION, POSITION_CORRECTION,
                                         RESIDUAL_SIZE, VELOCITY_CORRECTION)
 from mbh._adapters.inhouse.numerics.rank import full_pivot_elimination
@@ -22,8 +21,10 @@ from mbh._adapters.inhouse.stepping.loop_codes import (CONSTRAINT_ARGS, DYNAMICS
                                                        FACTORIZATIONS, FAILED_RANK, GAINS,
                                                        GENERATED, JACOBIAN_EVALS, KERNEL_CALLS,
                                                        NEWTON_ITERATIONS, PARTITIONED, REPARTITION,
-                                                       RHS_EVALS, ROWS, RUNNING, SPARSITY,
-                                                       STEP_ENDS, STEP_END_KERNELS)
+                                                       RHS_EVALS, RIGHT_HAND_SIDE, ROWS,
+                                                       RUNNING, SPARSITY, STEP_ENDS,
+                                                       STEP_END_KERNELS)
+from mbh._adapters.inhouse.stepping.native_call import call_native
 
 
 @njit(cache=True)
@@ -146,12 +147,15 @@ def count_evaluation(counters):
 
 @njit(cache=True, inline="always")
 def kernel_acceleration(q, v, t, model, counters):
-    """q̈ of the index-1 form by the kernel (:func:`index1_acceleration`), for a call the
-    generated right-hand side declined (a guard failed, or ``NEVER``)."""
+    """q̈ of the index-1 form by the kernel
+    (:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`, called through its
+    entry ``model[RIGHT_HAND_SIDE]``: :mod:`.native_call`), for a call the generated right-hand
+    side declined (a guard failed, or ``NEVER``)."""
     counters[KERNEL_CALLS] += 1
     gains = model[GAINS]
-    return index1_acceleration(q, v, t, gains[0], gains[1], model[ROWS], model[CONSTRAINT_ARGS],
-                               model[DYNAMICS_ARGS], model[SPARSITY])
+    return call_native(model[RIGHT_HAND_SIDE], (q, v, t, gains[0], gains[1], model[ROWS],
+                                                model[CONSTRAINT_ARGS], model[DYNAMICS_ARGS],
+                                                model[SPARSITY]))
 
 
 @njit(cache=True, inline="always")

@@ -16,6 +16,7 @@ import hashlib
 
 from mbh._harness.common import file_lock, waits
 from mbh._harness.common.kernel_cache import kernel_folder, mark_ready
+from mbh._adapters.inhouse.stepping.native_call import NativeEntry
 
 #: What the announcement of a loop's compilation says to expect (:func:`entry`), s: the generated steps' loop
 #: compiled in 1.9 s, the one-step methods' full loop from an empty cache in ~160 s (its
@@ -24,6 +25,10 @@ from mbh._harness.common.kernel_cache import kernel_folder, mark_ready
 #: share most of that code and were measured only after it (6–13 s): the full loop's figure is
 #: their estimate too.
 GENERATED_LOOP_S, FULL_LOOP_S = 2.0, 160.0
+#: The same for the absolute right-hand side kernel the full loops call
+#: (:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`, its forces, Φ_q, γ
+#: and solves with it): 54 s from an empty cache (2026-11-30, ``benchmarks/compile_cost.py``).
+RIGHT_HAND_SIDE_S = 60.0
 
 
 def _types(dispatcher, args: tuple) -> tuple:
@@ -54,7 +59,18 @@ def entry(dispatcher, args: tuple, what: str, estimate_s: float):
     waits for the first (the loop's lock here, so that it does not announce a compilation it will
     not make; the kernels' own locks, :mod:`mbh._harness.common.kernel_cache`) and then loads it.
     """
-    types = _types(dispatcher, args)
+    return _overload(dispatcher, _types(dispatcher, args), what, estimate_s).entry_point
+
+
+def resolve(native: NativeEntry, what: str, estimate_s: float) -> None:
+    """Point ``native`` at its kernel, compiled (announced as ``what``, expected to take
+    ``estimate_s``) or loaded now if it is not yet, as :func:`entry` does for a loop."""
+    if not native.address:
+        native.resolve(_overload(native.dispatcher, native.argument_types, what, estimate_s))
+
+
+def _overload(dispatcher, types: tuple, what: str, estimate_s: float):
+    """``dispatcher``'s compiled version (``CompileResult``) for ``types``: :func:`entry`."""
     overload = dispatcher.overloads.get(types)
     if overload is None:
         name = dispatcher.py_func.__name__
@@ -67,4 +83,4 @@ def entry(dispatcher, args: tuple, what: str, estimate_s: float):
                     dispatcher.compile(types)
                 mark_ready(marker)
         overload = dispatcher.overloads[types]
-    return overload.entry_point
+    return overload

@@ -21,7 +21,6 @@ import pytest
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunGrid
-from mbh._adapters.inhouse.stepping import compiled
 from mbh._adapters.inhouse.numerics.linalg import (certified_spd_solve, min_norm_solve,
                                                    truncated_solve)
 from mbh._harness.model import scenario
@@ -105,11 +104,7 @@ def test_a_whole_run_in_one_call_hands_out_each_sample_and_refuses_to_go_back():
         adapter._start(mech, spec, params, grid)
     for t in grid.sample_times:
         whole._step_to(t)
-        stepwise.q, stepwise.v, stepwise.steps, _ = compiled.run_steps(
-            stepwise.q, stepwise.v, 0.0, grid.dt, stepwise.steps, grid.steps(t),
-            stepwise._method, stepwise._model, stepwise._code, stepwise._projection,
-            stepwise._partition, stepwise._check_due, stepwise._limit, stepwise.passages.arrays,
-            stepwise._counters)
+        stepwise.q, stepwise.v, stepwise.steps, _ = stepwise._run(grid.steps(t))
         assert whole.steps == stepwise.steps
         q, v = whole._full(t)  # the stored sample's row, cut out when read
         np.testing.assert_array_equal(q, stepwise.q)
