@@ -11,11 +11,10 @@ compiling at install time is in docs/speed.md, "What a first run compiles".
 
 The work is a list of tiny in-house cases, each of which compiles one part, in phases: a phase's
 cases run in parallel processes, and a phase starts once the previous one has ended, because its
-cases load what the previous one compiled (the multistep and partitioned loops call the one-step
-loop's steps).  Within a phase a case may still call what another compiles: the one-step loop
-calls the kernels' right-hand side (about a minute and a half alone), and compiles its other
-callees meanwhile, then waits on that kernel's lock and loads it.  The other cases need nothing
-the phases compile, or wait on its locks: the DAE solver's kernels and the joint-coordinate path
+cases load what the previous one compiled (the multistep loops call the one-step loop's step
+and projection).  The loops call the kernels' right-hand side through its address
+(:mod:`mbh._adapters.inhouse.stepping.native_call`), so the one-step loop compiles beside it
+without waiting for it.  The other cases need nothing the phases compile, or wait on its locks: the DAE solver's kernels and the joint-coordinate path
 (:data:`BESIDE_PHASES`), then the generated functions of the shipped scenes' ``default`` and
 ``best`` and the neutral reference routes of a scene that declares its branch.  They run from
 the start on processes of their own at a lower priority (:data:`FILL_NICENESS`): they take the
@@ -37,23 +36,22 @@ from mbh._harness.common.status import CaseStatus
 
 #: (scene, method, dt s, t_end s, what it compiles) of each phase, longest first.
 PHASES = (
-    # The one-step loop calls the right-hand side, yet starts beside it: it compiles its other
-    # callees (the split check, the projection) while the first process compiles the right-hand
-    # side, then waits on that kernel's lock and loads it (harness/common/kernel_cache.py).
+    # The loops call the right-hand side through its address (stepping/native_call.py), not
+    # its code: the one-step loop compiles beside it, on the other process.
     (("fourbar", "rk4+baumgarte:loop=python", 1e-3, 0.002,
       "the kernels' right-hand side and the start's kernels"),
-     ("fourbar", "rk4+baumgarte:loop=compiled", 1e-3, 0.002, "the one-step methods' loop")),
-    # These call the one-step loop's steps (the multistep methods' start, partitioning's stages).
+     ("fourbar", "rk4+baumgarte:loop=compiled", 1e-3, 0.002,
+      "the one-step and partitioned methods' loop")),
+    # These call the one-step loop's step and projection (the multistep methods' start).
     (("fourbar", "bdf2+baumgarte:loop=compiled", 1e-3, 0.004, "the implicit multistep loop"),
-     ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop"),
-     ("fourbar", "rk4+partition", 1e-3, 0.002, "the partitioned loop")),
+     ("fourbar", "ab2+baumgarte:loop=compiled", 1e-3, 0.004, "the explicit multistep loop")),
 )
 #: Cases that call nothing the phases compile but the kernels they share with the right-hand
 #: side (each waits on those kernels' locks and loads them): the first of the fill cases, so
 #: that they run while the one-step loop compiles instead of after it.  The joint-coordinate
-#: loops link the joint right-hand side (and direct's solves) that the Python path's case
-#: compiles: each waits on its lock, then compiles its own loop (one entry per method family and
-#: per treatment with or without the projection).
+#: loops call the joint right-hand side through its address: each compiles its own loop (one
+#: entry per method family and per treatment with or without the projection), then loads the
+#: right-hand side and the solves the Python path's case compiles (waiting on their locks).
 BESIDE_PHASES = (
     ("fourbar", "ida", 1e-3, 0.002, "the DAE solver's kernels"),
     ("fourbar", "rk4+direct:coords=joint,loop=python", 1e-3, 0.002,
