@@ -46,11 +46,12 @@ from mbh._harness.model.trajectory import BodyStates
 
 #: The treatments the compiled joint-coordinate loop runs.
 JOINT_LOOP_TREATMENTS = ("none", "baumgarte", "direct")
-#: What the announcements of the first compilations say to expect, s: the joint right-hand side
-#: the loops call took 46 s on an empty cache, then Adams–Bashforth's loop 16 s, rk4's 6 s and
-#: rk4+direct's 24 s (the projection's solves) (benchmarks/compile_cost.py, 2-core machine,
-#: 2026-11-29, when the loops still held the right-hand side's code).
-JOINT_RIGHT_HAND_SIDE_S, JOINT_LOOP_S = 46.0, 24.0
+#: What the announcements of the first compilations say to expect, s: on Bricard from an empty
+#: cache, after the reduced kernel and the start's pivots (29 s), Adams–Bashforth's loop took 8 s
+#: and the joint right-hand side it calls through its address 15 s (benchmarks/compile_cost.py,
+#: 2-core machine, 2026-11-30); rk4+direct's loop, with the projection's solves, 16 s in a
+#: warm-up.
+JOINT_RIGHT_HAND_SIDE_S, JOINT_LOOP_S = 15.0, 16.0
 #: The run's note on its loop.
 COMPILED_NOTE = "joint coordinates stepped on their compiled loop (one compiled call a run)"
 #: The note of a run whose right-hand side was generated for its mechanism.

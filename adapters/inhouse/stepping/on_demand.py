@@ -18,17 +18,15 @@ from mbh._harness.common import file_lock, waits
 from mbh._harness.common.kernel_cache import kernel_folder, mark_ready
 from mbh._adapters.inhouse.stepping.native_call import NativeEntry
 
-#: What the announcement of a loop's compilation says to expect (:func:`entry`), s: the generated steps' loop
-#: compiled in 1.9 s, the one-step methods' full loop from an empty cache in ~160 s (its
-#: right-hand side kernel included), on the 2-core machine (2026-11-29,
-#: ``benchmarks/compile_cost.py``).  The other full loops (partitioning's, the multistep ones)
-#: share most of that code and were measured only after it (6–13 s): the full loop's figure is
-#: their estimate too.
-GENERATED_LOOP_S, FULL_LOOP_S = 2.0, 160.0
-#: The same for the absolute right-hand side kernel the full loops call
-#: (:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`, its forces, Φ_q, γ
-#: and solves with it): 54 s from an empty cache (2026-11-30, ``benchmarks/compile_cost.py``).
-RIGHT_HAND_SIDE_S = 60.0
+#: What the announcement of a loop's compilation says to expect (:func:`entry`), s: the generated
+#: steps' loop compiled in 1.9 s; the one-step methods' full loop, from an empty cache once the
+#: start's kernels were compiled, in 62 s, and the absolute right-hand side kernel it calls
+#: through its address (:func:`resolve`,
+#: :func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`, its forces, Φ_q, γ
+#: and solves with it) 59 s more, on the 2-core machine (2026-11-30,
+#: ``benchmarks/compile_cost.py``).  The other full loops (the multistep ones) share much of that
+#: code and were measured only after it (7–10 s): the full loop's figure is their estimate too.
+GENERATED_LOOP_S, FULL_LOOP_S, RIGHT_HAND_SIDE_S = 2.0, 62.0, 59.0
 
 
 def _types(dispatcher, args: tuple) -> tuple:
