@@ -14,13 +14,13 @@ cases run in parallel processes, and a phase starts once the previous one has en
 cases load what the previous one compiled (the multistep loops call the one-step loop's step
 and projection).  The loops call the kernels' right-hand side through its address
 (:mod:`mbh._adapters.inhouse.stepping.native_call`), so the one-step loop compiles beside it
-without waiting for it.  The other cases need nothing the phases compile, or wait on its locks: the DAE solver's kernels and the joint-coordinate path
-(:data:`BESIDE_PHASES`), then the generated functions of the shipped scenes' ``default`` and
-``best`` and the neutral reference routes of a scene that declares its branch.  They run from
-the start on processes of their own at a lower priority (:data:`FILL_NICENESS`): they take the
-cores the phases leave idle, a process waiting on another's lock among them, without slowing the
-phases' chain, which sets the warm-up's length.  A case that fails is reported, not raised: the
-runs that need its part compile it themselves.
+without waiting for it.  The other cases need nothing the phases compile, or wait on its locks:
+the DAE solver's kernels and the joint-coordinate path (:data:`BESIDE_PHASES`), then the
+generated functions of the shipped scenes' ``default`` and ``best`` and the neutral reference
+routes of a scene that declares its branch.  They run from the start on processes of their own
+at a lower priority (:data:`FILL_NICENESS`): they take the cores the phases leave idle, a process
+waiting on another's lock among them, without slowing the phases' chain.  A case that fails is
+reported, not raised: the runs that need its part compile it themselves.
 """
 
 from __future__ import annotations

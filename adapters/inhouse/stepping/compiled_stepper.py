@@ -225,11 +225,11 @@ class CompiledStepper(FormulationStepper):
                 else self._samples_args(np.zeros(0, np.int64)))
 
     def _full_entry(self):
-        """The full loop's compiled function, compiled now (or loaded) if it is not yet: inside a
-        run, when the generated steps first hand a step over, that time is left out of the
-        run's wall time (:attr:`untimed_s`), as it was when the loop was always loaded before
-        the run, and a compilation (a wait that is said, :mod:`mbh._harness.common.waits`) is
-        noted."""
+        """The full loop's compiled function, compiled now (or loaded) if it is not yet, with the
+        right-hand side kernel it calls (:attr:`_right_hand_side`): inside a run, when the
+        generated steps first hand a step over, that time is left out of the run's wall time
+        (:attr:`untimed_s`), as it was when the loop was always loaded before the run, and a
+        compilation (a wait that is said, :mod:`mbh._harness.common.waits`) is noted."""
         if self._entry is None:
             began = time.perf_counter()
             self._entry = on_demand.entry(self._dispatcher, self._full_args(),

@@ -3,16 +3,17 @@ code does not hold the kernel's code again.
 
 numba compiles every ``@njit`` function into a library of its own, and a function that calls
 another links the callee's whole library into its own and optimises and generates machine code
-for all of it once more.  The right-hand sides (:func:`~.formulations.dynamics.
-index1_acceleration`, :func:`~.formulations.joint_rhs.acceleration_kernel`, with their forces,
-Jacobians, γ and solves) are most of the loops' code, and six loops and steps linked the absolute
-one: on an empty cache each compiled its copy again (docs/speed.md, "What a first run
-compiles").  Called here instead, a loop holds an indirect call: :class:`NativeEntry` carries the
-kernel's address, found at run time once the kernel is compiled or loaded, and
-:func:`call_native` calls it with numba's own calling convention, so that an exception the kernel
-raises reaches the loop as a direct call's would (a ``try`` in the loop catches it; outside one
-it leaves the loop).  The call itself costs what a direct call costs: numba did not inline the
-kernel into its callers before either.
+for all of it once more.  The right-hand sides
+(:func:`~mbh._adapters.inhouse.formulations.dynamics.index1_acceleration`,
+:func:`~mbh._adapters.inhouse.formulations.joint_rhs.acceleration_kernel`, with their forces,
+Jacobians, γ and solves) were linked into every loop and step above them, and on an empty cache
+each compiled its copy again (docs/speed.md, "What a first run compiles").  Called here instead,
+a loop holds an indirect call: :class:`NativeEntry` carries the kernel's address, found at run
+time once the kernel is compiled or loaded, and :func:`call_native` calls it with numba's own
+calling convention, so that an exception the kernel raises reaches the loop as a direct call's
+would (a ``try`` in the loop catches it; outside one it leaves the loop).  It costs: runs that
+take every right-hand side from the kernels stepped 2–6 % slower than with the linked kernel,
+for a tenth less compiling (docs/speed.md, "The right-hand sides called through their address").
 
 Typing keeps the address and the call in agreement: a :class:`NativeEntry`'s numba type is its
 kernel's name, argument types and return type, and :func:`call_native` accepts only arguments of
