@@ -6,11 +6,13 @@ conditioning of Φ_q along a motion (``conditioning``), the one start every engi
 compiled in ``dynamics_kernels``).
 
 Its compiled kernels are cached where :mod:`mbh._harness.common.kernel_cache` places them, set up here
-before any of its modules loads.
+before any of its modules loads, with the two of numba's compile-time costs
+:mod:`mbh._harness.common.numba_compile_speed` takes out.
 
 May import: :mod:`mbh._harness.common`, :mod:`mbh._harness.model`.
 """
 
-from mbh._harness.common import kernel_cache
+from mbh._harness.common import kernel_cache, numba_compile_speed
 
 kernel_cache.install()
+numba_compile_speed.install()
