@@ -113,17 +113,18 @@ class NotTraceable(NotGenerated):
 (ACCELERATION, RESIDUAL_SIZE, POSITION_CORRECTION, VELOCITY_CORRECTION, INDICATOR,
  JOINT_ACCELERATION) = range(6)
 #: The part of a generated module that compiles its straight-line function (``{name}``):
-#: numba's ``cfunc`` of :data:`SIGNATURE` that calls ``{name}_operations``, whose operations
-#: :func:`~mbh._adapters.inhouse.codegen.straight_line.straight_line` emits.  Everything before it is
+#: numba's ``cfunc`` of :data:`SIGNATURE` that calls ``{name}_emitted``, the intrinsic
+#: :func:`~mbh._adapters.inhouse.codegen.straight_line.straight_line` makes of
+#: ``{name}_operations`` (Python calls the latter; the cfunc is for compiled callers).  Everything before it is
 #: plain Python (:func:`declines_at_start` runs it).
 _COMPILED_PART = """
 
-straight_line({name}_operations)
+{name}_emitted = straight_line({name}_operations)
 
 
 @cfunc(SIGNATURE, cache=True)
 def {name}(q, v, t, out):
-    return {name}_operations(q, v, t, out)
+    return {name}_emitted(q, v, t, out)
 """
 _NAMES = ("acceleration", "residual_size", "position_correction", "velocity_correction",
           "indicator", "joint_acceleration")

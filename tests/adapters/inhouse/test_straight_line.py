@@ -5,6 +5,8 @@ tracer writes; anything else is refused with its line."""
 from __future__ import annotations
 
 import importlib.util
+import os
+import subprocess
 import sys
 import textwrap
 
@@ -67,8 +69,8 @@ def call(function, q, v, t, out):
 
 def test_a_compiled_call_returns_the_python_result_to_the_bit(tmp_path):
     module = module_from(tmp_path, "mbh_test_every_construct", EVERY_CONSTRUCT)
-    python = straight_line(module.f)
-    compiled = cfunc(SIGNATURE)(lambda q, v, t, out: python(q, v, t, out))
+    emitted = straight_line(module.f)
+    compiled = cfunc(SIGNATURE)(lambda q, v, t, out: emitted(q, v, t, out))
     rng = np.random.default_rng(7)
     accepted = declined = 0
     for trial in range(300):
@@ -77,7 +79,7 @@ def test_a_compiled_call_returns_the_python_result_to_the_bit(tmp_path):
             q[:] = [0.0, 0.0]  # x4 = 0: x9 = |-1.5 / (2 - v)| stays positive
         t = float(rng.standard_normal())
         expected, got = np.full(5, 7.0), np.full(5, 7.0)
-        result = python(q, v, t, expected)
+        result = module.f(q, v, t, expected)
         assert call(compiled, q, v, t, got) == result
         if result:
             accepted += 1
@@ -101,8 +103,57 @@ def test_a_statement_outside_the_form_is_refused_with_its_file_and_line(tmp_path
             return 1
         ''')
     module = module_from(tmp_path, f"mbh_test_refused_{abs(hash(statement))}", source)
-    straight_line(module.g)
+    emitted = straight_line(module.g)
     with pytest.raises(Exception) as raised:
-        cfunc(SIGNATURE)(lambda q, v, t, out: module.g(q, v, t, out))
+        cfunc(SIGNATURE)(lambda q, v, t, out: emitted(q, v, t, out))
     assert isinstance(raised.value, NotStraightLine) or "NotStraightLine" in str(raised.value)
     assert f"{module.__file__}, line 7: " in str(raised.value)  # the file and line of the source
+
+
+#: A generated module as mbh._adapters.inhouse.codegen.generated writes it, long enough for LLVM
+#: not to inline its operations into their caller: ``scale`` differs between modules, every name
+#: is the same.
+CACHED_MODULE = """
+import numpy as np
+from numba import cfunc
+
+from mbh._adapters.inhouse.codegen.generated import SIGNATURE
+from mbh._adapters.inhouse.codegen.straight_line import straight_line
+
+
+def acceleration_operations(q, v, t, out):
+    x0 = q[0]
+{chain}
+    out[0] = x0 * {scale}
+    out[1] = x{length}
+    return 1
+
+
+acceleration_emitted = straight_line(acceleration_operations)
+
+
+@cfunc(SIGNATURE, cache=True)
+def acceleration(q, v, t, out):
+    return acceleration_emitted(q, v, t, out)
+"""
+#: Statements of the chain in :data:`CACHED_MODULE`.
+CHAIN = 2000
+
+
+def test_two_cached_modules_of_the_same_names_keep_their_own_operations(tmp_path):
+    """Each module compiled and cached by a process of its own, then both loaded into one: a
+    compiled function whose symbol recurred in both caches would run one module's operations
+    for the other's."""
+    chain = "\n".join(f"    x{i + 1} = x{i} * 0.5 + v[0]" for i in range(CHAIN))
+    names = {"mbh_test_cached_two": 2.0, "mbh_test_cached_three": 3.0}
+    for name, scale in names.items():
+        source = CACHED_MODULE.format(chain=chain, scale=scale, length=CHAIN)
+        (tmp_path / f"{name}.py").write_text(source)
+        subprocess.run([sys.executable, "-c", f"import {name}"], cwd=tmp_path, check=True,
+                       env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    for name, scale in names.items():
+        module = module_from(tmp_path, name, (tmp_path / f"{name}.py").read_text())
+        assert module.acceleration._cache_hits, "compiled anew instead of loaded from its cache"
+        out = np.zeros(2)
+        assert call(module.acceleration, np.array([1.5]), np.zeros(1), 0.0, out) == 1
+        assert out[0] == 1.5 * scale

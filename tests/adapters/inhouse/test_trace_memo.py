@@ -10,6 +10,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from numba import njit
 
 from mbh._adapters import get_adapter
 from mbh._adapters.base import RunGrid
@@ -53,9 +54,14 @@ def no_tracing(monkeypatch) -> list:
     return calls
 
 
+@njit
+def _call(function, q, v, t, out):
+    return function(q, v, t, out)
+
+
 def residual_size(function, q: np.ndarray, v: np.ndarray) -> float:
     out = np.zeros(1)
-    assert function(q, v, 0.0, out) == 1
+    assert _call(function, q, v, 0.0, out) == 1
     return float(out[0])
 
 
