@@ -65,12 +65,11 @@ SIGNATURE = types.int64(types.float64[::1], types.float64[::1], types.float64,
                         types.float64[::1])
 
 #: Generated source lines compiled a second, about (the announcement's estimate): measured
-#: 3,500–4,500 on the shipped scenes' functions of 600–7,000 lines (docs/speed.md), ~0.1 s more
-#: for a short one.
-LINES_PER_SECOND = 4000
+#: 6,000–8,000 on functions of 5,000–19,000 lines (docs/speed.md), ~0.3 s for a short one.
+LINES_PER_SECOND = 6000
 #: Traces with more operations are not compiled (the kernel runs instead).  Set when numba
 #: compiled ~1,000 straight-line operations a second (a mechanism of tens of bodies would have
-#: waited minutes); compiling is ~4× faster now (:mod:`~mbh._adapters.inhouse.codegen.straight_line`),
+#: waited minutes); compiling is 6–8× faster now (:mod:`~mbh._adapters.inhouse.codegen.straight_line`),
 #: but the trace itself, in Python, grows with it, and larger traces were not measured.
 MAX_OPERATIONS = 20_000
 
