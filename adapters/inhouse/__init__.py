@@ -1,6 +1,7 @@
 """The in-house formulation (Rouvinen 2003): its compiled kernels are cached where
-:mod:`mbh._harness.common.kernel_cache` places them, set up here before any of its modules loads, with the two of numba's compile-time costs
-:mod:`mbh._harness.common.numba_compile_speed` takes out."""
+:mod:`mbh._harness.common.kernel_cache` places them, set up here before any of its modules loads,
+with the two of numba's compile-time costs :mod:`mbh._harness.common.numba_compile_speed` takes
+out."""
 
 from mbh._harness.common import kernel_cache, numba_compile_speed
 

@@ -114,8 +114,8 @@ class NotTraceable(NotGenerated):
 #: The part of a generated module that compiles its straight-line function (``{name}``):
 #: numba's ``cfunc`` of :data:`SIGNATURE` that calls ``{name}_emitted``, the intrinsic
 #: :func:`~mbh._adapters.inhouse.codegen.straight_line.straight_line` makes of
-#: ``{name}_operations`` (Python calls the latter; the cfunc is for compiled callers).  Everything before it is
-#: plain Python (:func:`declines_at_start` runs it).
+#: ``{name}_operations`` (Python calls the latter; the cfunc is for compiled callers).
+#: Everything before it is plain Python (:func:`declines_at_start` runs it).
 _COMPILED_PART = """
 
 {name}_emitted = straight_line({name}_operations)
