@@ -25,10 +25,11 @@ the 280 profiled seconds of compiling the in-house kernels went to two pieces of
 
 Neither changes what numba compiles: the optimised LLVM IR of a function with nested inlined
 calls is the same with and without them (``tests/common/test_numba_compile_speed.py``), and five
-warm-up cases on the four-bar step to the same bits from caches compiled either way.  The one-step loop's case of the warm-up and the
-kernels' right-hand side compiled in 140 s instead of 174 s (side by side, one core each).  The
-replacements are installed only for the numba series they were written against
-(:data:`WRITTEN_FOR`); with another numba they are left out and numba compiles as it ships.
+warm-up cases on the four-bar step to the same bits from caches compiled either way.  The
+one-step loop's case of the warm-up and the kernels' right-hand side compiled in 140 s instead
+of 174 s (side by side, one core each).  The replacements are installed only for the numba
+series they were written against (:data:`WRITTEN_FOR`); with another numba they are left out
+and numba compiles as it ships.
 """
 
 from __future__ import annotations

@@ -76,12 +76,13 @@ def _llvm_text(installed: bool) -> str:
 
 
 @pytest.fixture
-def numbas_own_afterwards():
+def replacements_back_afterwards():
+    """The replacements in place again after a test that took them out."""
     yield
     numba_compile_speed.install()
 
 
-@pytest.mark.usefixtures("numbas_own_afterwards")
+@pytest.mark.usefixtures("replacements_back_afterwards")
 def test_inlining_without_copies_compiles_the_same_code():
     as_shipped = _llvm_text(installed=False)
     assert _llvm_text(installed=False) == as_shipped  # the comparison sees no compilation's ids
