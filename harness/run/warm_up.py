@@ -15,12 +15,13 @@ cases load what the previous one compiled (the multistep loops call the one-step
 and projection).  The loops call the kernels' right-hand side through its address
 (:mod:`mbh._adapters.inhouse.stepping.native_call`), so the one-step loop compiles beside it
 without waiting for it.  The other cases need nothing the phases compile, or wait on its locks:
-the DAE solver's kernels and the joint-coordinate path (:data:`BESIDE_PHASES`), then the
-generated functions of the shipped scenes' ``default`` and ``best`` and the neutral reference
-routes of a scene that declares its branch.  They run from the start on processes of their own
-at a lower priority (:data:`FILL_NICENESS`): they take the cores the phases leave idle, a process
-waiting on another's lock among them, without slowing the phases' chain.  A case that fails is
-reported, not raised: the runs that need its part compile it themselves.
+the neutral reference routes of a scene that declares its branch, the DAE solver's kernels and
+the joint-coordinate path (:data:`BESIDE_PHASES`), then the generated functions of the shipped
+scenes' ``default`` and ``best``.  They run from the start on processes of their own, one more
+than the phases have (:data:`FILL_EXTRA`), at a lower priority (:data:`FILL_NICENESS`): they
+take the cores the phases leave idle, a process waiting on another's lock among them, without
+slowing the phases' chain.  A case that fails is reported, not raised: the runs that need its
+part compile it themselves.
 """
 
 from __future__ import annotations
@@ -77,6 +78,13 @@ NEUTRAL_ROUTES = "neutral reference routes"
 #: ~9 of every 10 time slices (Linux's weights: 1024 against 110), so the fill cases use the
 #: cores the phases leave idle without lengthening the chain of phases.
 FILL_NICENESS = 10
+#: Fill processes beyond ``jobs`` (the phases' processes), so that a fill case waiting on a
+#: lock (the joint-coordinate loops wait on each other's, the DAE solver on the right-hand
+#: side's) leaves its core to another fill case instead of idle.  Measured on the 2-core
+#: machine, empty caches, one after the other (docs/speed.md): 121 and 126 s with two fill
+#: processes and the neutral routes last, 116 s with them first, 111 and 115 s with them
+#: first and a third fill process (CPU the same, ~215 s).
+FILL_EXTRA = 1
 #: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md): the announcement.
 ESTIMATE_S = 200.0
 
@@ -106,11 +114,12 @@ class Warmed:
 
 
 def _fill_cases() -> list[WarmCase]:
-    """:data:`BESIDE_PHASES`, then the generated functions of :data:`FILL_SCENES`' default and
-    best (``loop=generated``)."""
-    return [WarmCase(*case) for case in BESIDE_PHASES] + [
-        WarmCase(scene, NEUTRAL_ROUTES, 1e-3, 0.002, "the neutral reference kernels")
-            for scene in NEUTRAL_FILL_SCENES] + [
+    """The neutral reference routes of :data:`NEUTRAL_FILL_SCENES` (the longest fill case, ~25
+    s, and one that waits on no lock: started first, it no longer ends the warm-up alone), then
+    :data:`BESIDE_PHASES`, then the generated functions of :data:`FILL_SCENES`' default and best
+    (``loop=generated``)."""
+    return [WarmCase(scene, NEUTRAL_ROUTES, 1e-3, 0.002, "the neutral reference kernels")
+            for scene in NEUTRAL_FILL_SCENES] + [WarmCase(*case) for case in BESIDE_PHASES] + [
         WarmCase(scene, f"{alias}:loop=generated", 1e-3, 0.002,
                  f"{scene}'s generated functions ({alias})")
         for scene in FILL_SCENES for alias in ("rk4+baumgarte", "rk4+direct")]
@@ -147,9 +156,9 @@ def _lower_priority() -> None:
 
 
 def warm_up(jobs: int) -> list[Warmed]:
-    """Run :data:`PHASES` on ``jobs`` processes and, from the start, :data:`BESIDE_PHASES` and
-    the fill cases on ``jobs`` processes of lower priority; every case's :class:`Warmed`, in the
-    order they ended."""
+    """Run :data:`PHASES` on ``jobs`` processes and, from the start, the fill cases
+    (:func:`_fill_cases`) on ``jobs`` + :data:`FILL_EXTRA` processes of lower priority; every
+    case's :class:`Warmed`, in the order they ended."""
     done: list[Warmed] = []
 
     def record(future) -> None:
@@ -162,7 +171,7 @@ def warm_up(jobs: int) -> list[Warmed]:
     with waits.said(f"compiling the in-house kernels and loops on {jobs} process(es)",
                     "once per machine and version of the kernels", ESTIMATE_S), \
             ProcessPoolExecutor(max_workers=jobs, mp_context=context) as phases, \
-            ProcessPoolExecutor(max_workers=jobs, mp_context=context,
+            ProcessPoolExecutor(max_workers=jobs + FILL_EXTRA, mp_context=context,
                                 initializer=_lower_priority) as fill:
         running = {fill.submit(_run, case) for case in _fill_cases()}
         for phase in PHASES:
