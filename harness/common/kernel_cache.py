@@ -49,7 +49,7 @@ import llvmlite
 import numba
 from numba.core import caching, event
 
-from mbh._harness.common import file_lock, waits
+from mbh._harness.common import file_lock, kernel_opt_level, waits
 from mbh._harness.common.locations import (ADAPTERS_FOLDER, CODE_ROOT, HARNESS_FOLDER,
                                            generated_cache, user_cache)
 
@@ -63,8 +63,11 @@ LAST_USE = "last-use"
 
 
 def toolchain() -> str:
-    """The Python, numba and llvmlite versions: a binary built by others is not loaded."""
-    return f"python {sys.version}; numba {numba.__version__}; llvmlite {llvmlite.__version__}"
+    """The Python, numba and llvmlite versions and the kernels' LLVM level
+    (:data:`~mbh._harness.common.kernel_opt_level.LEVEL`): a binary built by others is not
+    loaded."""
+    return (f"python {sys.version}; numba {numba.__version__}; llvmlite {llvmlite.__version__}; "
+            f"LLVM level {kernel_opt_level.LEVEL}")
 
 
 def fingerprint(files: Iterable[Path] = ()) -> str:

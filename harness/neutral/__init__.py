@@ -7,12 +7,14 @@ compiled in ``dynamics_kernels``).
 
 Its compiled kernels are cached where :mod:`mbh._harness.common.kernel_cache` places them, set up here
 before any of its modules loads, with the two of numba's compile-time costs
-:mod:`mbh._harness.common.numba_compile_speed` takes out.
+:mod:`mbh._harness.common.numba_compile_speed` takes out and at the LLVM level of
+:mod:`mbh._harness.common.kernel_opt_level`.
 
 May import: :mod:`mbh._harness.common`, :mod:`mbh._harness.model`.
 """
 
-from mbh._harness.common import kernel_cache, numba_compile_speed
+from mbh._harness.common import kernel_cache, kernel_opt_level, numba_compile_speed
 
 kernel_cache.install()
 numba_compile_speed.install()
+kernel_opt_level.install()

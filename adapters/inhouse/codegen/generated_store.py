@@ -44,7 +44,7 @@ from pathlib import Path
 from types import ModuleType
 
 from mbh._adapters.inhouse.codegen import straight_line
-from mbh._harness.common import file_lock
+from mbh._harness.common import file_lock, kernel_opt_level
 from mbh._harness.common.errors import MbhError
 from mbh._harness.common.kernel_cache import fingerprint
 from mbh._harness.common.locations import generated_cache
@@ -225,12 +225,14 @@ def _write_whole(path: Path, content: bytes) -> None:
 
 def _import(name: str, path: Path) -> ModuleType:
     """Execute ``path`` as module ``name``, registered in :data:`sys.modules` while it runs and
-    after (removed again when it raises)."""
+    after (removed again when it raises); its function compiles at the kernels' LLVM level
+    (:mod:`mbh._harness.common.kernel_opt_level`)."""
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module
     try:
-        spec.loader.exec_module(module)
+        with kernel_opt_level.at_kernel_level():
+            spec.loader.exec_module(module)
     except BaseException:
         del sys.modules[name]
         raise
