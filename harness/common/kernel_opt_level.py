@@ -1,15 +1,17 @@
 """The LLVM optimisation level of the in-house kernels and generated functions: 2, not numba's 3.
 
 numba optimises every function it compiles with LLVM's passes at ``numba.config.OPT`` (3 unless
-``NUMBA_OPT`` says otherwise).  On the kernels (:data:`~mbh._harness.common.kernel_cache.
-KERNEL_PACKAGES`) level 3 buys nothing that level 2 does not: every warm-up case compiled at
-both levels, one process each on an empty cache, stepped to the same bits (fifteen runs: the
-compiled one-step, partitioned, multistep, joint-coordinate and generated loops, Bricard on the
-kernels, the Python path), and the bare loops stepped as fast (best of three alternating rounds,
-level 2 against 3: 0.94–1.04, within the rounds' own spread), while compiling took 176 s
-instead of 197 s (docs/speed.md, "LLVM's level 2 for the kernels").  numba compiles without
-fast-math, so neither level may reorder a floating-point operation: the bits are the same by
-construction, and the tests compare them (``tests/common/test_kernel_opt_level.py``).
+``NUMBA_OPT`` says otherwise).  On the kernels
+(:data:`~mbh._harness.common.kernel_cache.KERNEL_PACKAGES`) level 3 buys nothing that level 2
+does not.  Every warm-up case compiled at both levels, one process each on an empty cache,
+stepped to the same bits (fifteen runs: the compiled one-step, partitioned, multistep,
+joint-coordinate and generated loops, Bricard on the kernels, the Python path), and the bare
+loops stepped as fast (best of three alternating rounds, level 2 against 3: 0.94–1.04, within
+the rounds' own spread).  Compiling took 176 s instead of 197 s with ``NUMBA_OPT=2`` for the
+whole process, and 192 s instead of 203 s with the level scoped as here (docs/speed.md, "LLVM's
+level 2 for the kernels").  numba compiles without fast-math, so neither level may reorder a
+floating-point operation: the bits are the same by construction, and the tests compare them
+(``tests/common/test_kernel_opt_level.py``).
 
 The level is set only while numba compiles a function of the kernel packages (a
 ``numba:compile`` event listener, :class:`KernelLevel`) or a generated module
