@@ -85,8 +85,9 @@ FILL_NICENESS = 10
 #: processes and the neutral routes last, 116 s with them first, 111 and 115 s with them
 #: first and a third fill process (CPU the same, ~215 s).
 FILL_EXTRA = 1
-#: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md): the announcement.
-ESTIMATE_S = 200.0
+#: Measured length of a cold warm-up on the 2-core machine, s (docs/speed.md: 108–115 s on
+#: 2026-11-30, with a margin for a busier machine): the announcement.
+ESTIMATE_S = 130.0
 
 
 @dataclass(frozen=True)
