@@ -7,4 +7,4 @@ from mbh._harness.common import kernel_cache, kernel_opt_level, numba_compile_sp
 
 kernel_cache.install()
 numba_compile_speed.install()
-kernel_opt_level.install()
+kernel_opt_level.install(__name__)

@@ -13,14 +13,14 @@ level 2 for the kernels").  numba compiles without fast-math, so neither level m
 floating-point operation: the bits are the same by construction, and the tests compare them
 (``tests/common/test_kernel_opt_level.py``).
 
-The level is set only while numba compiles a function of the kernel packages (a
-``numba:compile`` event listener, :class:`KernelLevel`) or a generated module
-(:func:`at_kernel_level`), and put back afterwards, so a user's own numba code in the same
-process compiles at the level it would have had.  The level of LLVM's machine-code generation
-is the target machine's, fixed by numba when it first compiles anything in the process, and is
-left as it is.  :data:`LEVEL` is part of the kernels' cache fingerprint
-(:func:`~mbh._harness.common.kernel_cache.toolchain`), so a cache compiled at another level is
-not loaded.
+The level is set only while numba compiles a function of a package that asked for it (the
+kernel packages, from their ``__init__``: :func:`install`; a ``numba:compile`` event listener,
+:class:`KernelLevel`) or a generated module (:func:`at_kernel_level`), and put back afterwards,
+so a user's own numba code in the same process compiles at the level it would have had.  The
+level of LLVM's machine-code generation is the target machine's, fixed by numba when it first
+compiles anything in the process, and is left as it is.  :data:`LEVEL` is part of the kernels'
+cache fingerprint (:func:`~mbh._harness.common.kernel_cache.toolchain`), so a cache compiled at
+another level is not loaded.
 """
 
 from __future__ import annotations
@@ -31,8 +31,8 @@ from numba.core import config, event
 
 #: LLVM's optimisation level of the kernels' and generated functions' passes.
 LEVEL = 2
-#: Where the functions compiled at :data:`LEVEL` are defined (module name prefixes).
-KERNEL_MODULES = ("mbh._adapters.inhouse.", "mbh._harness.neutral.")
+#: The packages (module names) whose functions compile at :data:`LEVEL`: :func:`install`'s.
+_PACKAGES: set[str] = set()
 
 
 @contextlib.contextmanager
@@ -64,13 +64,15 @@ class KernelLevel(event.Listener):
 
 def _defined_in_kernels(dispatcher) -> bool:
     module = getattr(getattr(dispatcher, "py_func", None), "__module__", "") or ""
-    return module.startswith(KERNEL_MODULES)
+    return any(module == package or module.startswith(f"{package}.") for package in _PACKAGES)
 
 
 _LISTENER = KernelLevel()
 
 
-def install() -> None:
-    """Listen to numba's compilations (once per process)."""
+def install(package: str) -> None:
+    """Compile the functions of ``package`` (its ``__name__``) and of its modules at
+    :data:`LEVEL`; the listener is registered once per process."""
+    _PACKAGES.add(package)
     if _LISTENER not in event._registered.get("numba:compile", []):
         event.register("numba:compile", _LISTENER)

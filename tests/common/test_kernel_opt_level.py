@@ -16,7 +16,7 @@ from mbh._harness.model import scenario
 
 class _SeenLevels(event.Listener):
     """numba's level at the start of each compilation (after :class:`KernelLevel`, registered
-    first), by the compiled function's name."""
+    first when the kernel packages were imported), by the compiled function's name."""
 
     def __init__(self):
         self.levels = {}
@@ -36,7 +36,6 @@ def _function_of(module: str, body):
 
 @pytest.fixture
 def seen():
-    kernel_opt_level.install()
     listener = _SeenLevels()
     with event.install_listener("numba:compile", listener):
         yield listener.levels
@@ -96,7 +95,6 @@ def test_a_kernel_compiled_at_another_level_gives_the_same_bits(level, monkeypat
         return ([jacobian(q, 0.1, args) for q, _ in states]
                 + [gamma(q, v, 0.1, args) for q, v in states])
 
-    kernel_opt_level.install()
     ours, theirs = compiled_at(2), compiled_at(level)
     for mine, other in zip(ours, theirs):
         assert np.array_equal(mine, other)
